@@ -1,0 +1,165 @@
+"""Calibration boards: geometry, the Duckietown board and its ground placement.
+
+Object points are in the board frame: x to the right along a row of inner corners,
+y down the columns, z = 0 on the board, in the unit of ``square`` (metres for the
+Duckietown board). Corner order is OpenCV's: row by row, ``cols`` corners per row.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import DtscalError
+
+
+@dataclass(frozen=True)
+class Board:
+    """A checkerboard described by its inner corners.
+
+    Parameters
+    ----------
+    cols, rows : int
+        Inner corners per row and per column (OpenCV's ``patternSize = (cols, rows)``).
+        The board has ``cols + 1`` by ``rows + 1`` squares.
+    square : float
+        Side of one square, in any unit (the object points come out in it).
+
+    Examples
+    --------
+    >>> b = Board(7, 5, 0.031)
+    >>> b.object_points().shape
+    (35, 3)
+    """
+
+    cols: int = 7
+    rows: int = 5
+    square: float = 0.031
+
+    def __post_init__(self):
+        if int(self.cols) != self.cols or int(self.rows) != self.rows or self.cols < 2 or self.rows < 2:
+            raise DtscalError(
+                f"a board needs at least 2x2 inner corners, got {self.cols}x{self.rows}; "
+                "count the inner corners (where four squares meet), e.g. --board 7x5"
+            )
+        if not (np.isfinite(self.square) and self.square > 0):
+            raise DtscalError(f"square size must be a positive number, got {self.square!r}")
+
+    @property
+    def pattern_size(self) -> tuple[int, int]:
+        """``(cols, rows)``, as OpenCV's detectors take it."""
+        return (int(self.cols), int(self.rows))
+
+    @property
+    def n_corners(self) -> int:
+        return int(self.cols * self.rows)
+
+    def object_points(self) -> np.ndarray:
+        """Inner-corner coordinates on the board plane, (N, 3) float64, z = 0, row-major."""
+        j, i = np.mgrid[0 : self.rows, 0 : self.cols]
+        pts = np.zeros((self.n_corners, 3), dtype=np.float64)
+        pts[:, 0] = i.ravel() * self.square
+        pts[:, 1] = j.ravel() * self.square
+        return pts
+
+    def outer_corner_indices(self) -> tuple[int, int, int, int]:
+        """Indices of the grid's four outer corners: (top-left, top-right, bottom-right, bottom-left)."""
+        c, r = self.cols, self.rows
+        return (0, c - 1, c * r - 1, c * (r - 1))
+
+    def describe(self) -> str:
+        return f"{self.cols}x{self.rows} inner corners, {self.square:g} squares"
+
+
+#: the Duckietown calibration board: 8x6 squares, 7x5 inner corners, 31 mm squares
+DUCKIETOWN_BOARD = Board(7, 5, 0.031)
+
+
+def parse_board(spec: str, square: float | None = None) -> Board:
+    """Parse ``"CxR"`` (inner corners) into a :class:`Board`.
+
+    >>> parse_board("9x6", 0.025)
+    Board(cols=9, rows=6, square=0.025)
+    """
+    m = re.fullmatch(r"\s*(\d+)\s*[xX*]\s*(\d+)\s*", str(spec))
+    if not m:
+        raise DtscalError(f"board must be given as CxR inner corners, e.g. 7x5; got {spec!r}")
+    return Board(int(m.group(1)), int(m.group(2)), DUCKIETOWN_BOARD.square if square is None else float(square))
+
+
+# --- Ground placement for extrinsic calibration -------------------------------------------
+#: x (forward, metres) of the board's nearest row of inner corners
+GROUND_NEAR_ROW_X = 0.191
+#: |y| (metres) of the outermost inner-corner columns (corners span -0.093 .. +0.093)
+GROUND_HALF_WIDTH_Y = 0.093
+
+
+def ground_points(board: Board = DUCKIETOWN_BOARD, x0: float = GROUND_NEAR_ROW_X,
+                  y0: float | None = None) -> np.ndarray:
+    """Ground coordinates (robot frame, metres: x forward, y left) of the inner corners.
+
+    The board lies flat in front of the robot with its ``cols`` axis across the robot's
+    view and its ``rows`` going away. Points are ordered as the Duckietown extrinsic
+    procedure orders the detection: starting at the **near-right** corner
+    (smallest x, most negative y), running to the left along the near row, then row by
+    row away from the robot.
+
+    Parameters
+    ----------
+    x0 : float
+        x of the near row of inner corners.
+    y0 : float, optional
+        y of the right-most column (default: centred, ``-(cols-1)*square/2``,
+        i.e. -0.093 m for the Duckietown board).
+
+    Returns
+    -------
+    (cols*rows, 2) float64
+    """
+    if y0 is None:
+        y0 = -(board.cols - 1) * board.square / 2.0
+    j, i = np.mgrid[0 : board.rows, 0 : board.cols]
+    pts = np.empty((board.n_corners, 2), dtype=np.float64)
+    pts[:, 0] = x0 + j.ravel() * board.square
+    pts[:, 1] = y0 + i.ravel() * board.square
+    return pts
+
+
+def order_for_ground(image_points: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
+    """Reorder detected corners of a board lying in front of the robot to match :func:`ground_points`.
+
+    On the (rectified) image of a board lying ahead of the robot, the near row is the
+    bottom of the board in the image and the robot's right is the image's right. The
+    ground order starts at the near-right corner and runs leftward along the near row.
+    Whatever order the detector returned (OpenCV may start at any of the four ends), this
+    picks the one of the four grid traversals whose first corner is the bottom-right
+    and whose first step goes left.
+
+    Parameters
+    ----------
+    image_points : (cols*rows, 2) pixels, in a detector's row-major order.
+
+    Returns
+    -------
+    (cols*rows, 2) pixels in ground order.
+    """
+    pts = np.asarray(image_points, dtype=np.float64).reshape(-1, 2)
+    if len(pts) != board.n_corners:
+        raise DtscalError(f"expected {board.n_corners} corners for a {board.describe()} board, got {len(pts)}")
+    grid = pts.reshape(board.rows, board.cols, 2)
+    best, best_score = None, None
+    for cand in (grid, grid[::-1, ::-1], grid[::-1, :], grid[:, ::-1]):
+        first = cand[0, 0]
+        step_row = cand[0, 1] - cand[0, 0]   # along the near row: should go left (-u)
+        step_away = cand[1, 0] - cand[0, 0]  # away from the robot: should go up (-v)
+        score = first[1] + first[0] - step_row[0] - step_away[1]
+        if step_row[0] < 0 and step_away[1] < 0 and (best_score is None or score > best_score):
+            best, best_score = cand, score
+    if best is None:
+        raise DtscalError(
+            "could not order the board corners for the ground placement: the board does not "
+            "appear to lie ahead of the robot with its long side across the view"
+        )
+    return best.reshape(-1, 2).copy()

@@ -1,0 +1,138 @@
+"""Self-checks that exercise notebooks call after each student function.
+
+A check runs a student's function on cases with known answers (ground truth from the
+synthetic camera, or OpenCV), never against the solution code, and prints what passed,
+what failed and a hint. A function that still raises ``NotImplementedError`` is reported
+as "not implemented yet" and the notebook carries on.
+
+Each notebook's checks live in their own module (``nb01`` ... ``nb05``) built on
+:func:`run_check`:
+
+>>> def check_double(fn):
+...     return run_check("double", fn, [
+...         Case("doubles 2", lambda f: expect_close(f(2), 4, 0, "f(2)"), hint="multiply by 2"),
+...     ])
+"""
+
+from __future__ import annotations
+
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+PASS, FAIL, NOT_IMPLEMENTED = "pass", "fail", "not implemented yet"
+
+
+class CheckFailed(AssertionError):
+    """Raised by a case to fail it with a message for the student."""
+
+
+@dataclass
+class Case:
+    """One test case: ``run(fn)`` raises :class:`CheckFailed` (or any error) to fail."""
+
+    title: str
+    run: Callable[[Callable], Any]
+    hint: str = ""
+
+
+@dataclass
+class CaseResult:
+    title: str
+    status: str
+    message: str = ""
+    hint: str = ""
+
+
+@dataclass
+class Report:
+    """What a check found. ``status`` is ``"pass"``, ``"fail"`` or ``"not implemented yet"``."""
+
+    name: str
+    results: list[CaseResult] = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        if any(r.status == NOT_IMPLEMENTED for r in self.results):
+            return NOT_IMPLEMENTED
+        return PASS if self.results and all(r.status == PASS for r in self.results) else FAIL
+
+    @property
+    def passed(self) -> bool:
+        return self.status == PASS
+
+    def text(self) -> str:
+        if self.status == NOT_IMPLEMENTED:
+            return f"[ ] {self.name}: not implemented yet (replace the `raise NotImplementedError` with your code)"
+        n_ok = sum(r.status == PASS for r in self.results)
+        head = f"[{'x' if self.passed else '!'}] {self.name}: {n_ok}/{len(self.results)} checks passed"
+        lines = [head]
+        for r in self.results:
+            mark = "ok  " if r.status == PASS else "FAIL"
+            lines.append(f"    {mark} {r.title}" + (f": {r.message}" if r.message and r.status != PASS else ""))
+            if r.status != PASS and r.hint:
+                lines.append(f"         hint: {r.hint}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:  # what a notebook cell shows
+        return self.text()
+
+
+def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) -> Report:
+    """Run ``cases`` against the student's ``fn``; print and return the :class:`Report`.
+
+    A case that raises ``NotImplementedError`` stops the check (the function is still the
+    stub). Any other exception fails that case with the exception's message, so student
+    errors never escape the check and the notebook runs on.
+    """
+    report = Report(name)
+    for case in cases:
+        try:
+            case.run(fn)
+        except NotImplementedError:
+            report.results = [CaseResult(case.title, NOT_IMPLEMENTED)]
+            break
+        except CheckFailed as exc:
+            report.results.append(CaseResult(case.title, FAIL, str(exc), case.hint))
+        except Exception as exc:  # student code may raise anything
+            tb = traceback.extract_tb(exc.__traceback__)
+            where = f" (line {tb[-1].lineno} in {tb[-1].name})" if tb else ""
+            report.results.append(CaseResult(case.title, FAIL, f"{type(exc).__name__}: {exc}{where}", case.hint))
+        else:
+            report.results.append(CaseResult(case.title, PASS))
+    if show:
+        print(report.text())
+    return report
+
+
+def expect_shape(value, shape: tuple, what: str) -> np.ndarray:
+    """Fail unless ``value`` converts to a float array of ``shape`` (None matches any size)."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except Exception:
+        raise CheckFailed(f"{what} should be a numeric array, got {type(value).__name__}") from None
+    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise CheckFailed(f"{what} should have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise CheckFailed(f"{what} contains NaN or infinite values")
+    return arr
+
+
+def expect_close(value, expected, atol: float, what: str, rtol: float = 0.0) -> None:
+    """Fail unless ``value`` is within ``atol + rtol*|expected|`` of ``expected`` everywhere."""
+    v = np.asarray(value, dtype=np.float64)
+    e = np.asarray(expected, dtype=np.float64)
+    if v.shape != e.shape:
+        raise CheckFailed(f"{what} should have shape {e.shape}, got {v.shape}")
+    err = np.abs(v - e)
+    tol = atol + rtol * np.abs(e)
+    if not np.all(err <= tol):
+        i = np.unravel_index(np.nanargmax(err - tol), err.shape) if err.ndim else ()
+        raise CheckFailed(
+            f"{what} is off by up to {np.nanmax(err):.3g} (allowed {atol:g}"
+            + (f" + {rtol:g} relative" if rtol else "") + f"); worst at index {tuple(int(x) for x in i)}: "
+            f"got {v[i]!r}, expected {e[i]!r}"
+        )
