@@ -1,0 +1,246 @@
+"""The headless calibration pipeline: frames in, Duckietown calibration files out.
+
+These are the functions behind ``dtscal calibrate-intrinsics`` and
+``dtscal calibrate-extrinsics``; the live notebook wraps the same steps frame by frame.
+Nothing here raises on a bad frame: every unusable frame is counted under a reason
+and skipped. Errors are raised only when the run as a whole cannot produce a
+calibration, and then the message says what to do.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from . import calib_files
+from .boards import DUCKIETOWN_BOARD, Board
+from .calibration import CalibrationResult, calibrate
+from .coverage import CoverageTracker
+from .detect import detect_board
+from .errors import CalibrationError, DtscalError
+from .sources import Frame, open_source
+
+#: fewer samples than this cannot give a trustworthy calibration
+MIN_SAMPLES = 3
+
+
+@dataclass
+class FrameTally:
+    """How the frames of a run were used."""
+
+    total: int = 0
+    used: int = 0
+    rejected: Counter = field(default_factory=Counter)
+
+    def reject(self, reason: str) -> None:
+        self.rejected[reason] += 1
+
+    def to_dict(self) -> dict:
+        return {"total": self.total, "used": self.used, "rejected": dict(sorted(self.rejected.items()))}
+
+
+def usable_images(frames: Iterable[Frame], tally: FrameTally, expected_size=None):
+    """Yield ``(frame, image)`` for frames that decode to an image of a consistent size.
+
+    The first good frame fixes the size unless ``expected_size`` (w, h) is given; frames of
+    another size are counted as ``size_mismatch``; undecodable frames under their own reason.
+    """
+    size = tuple(expected_size) if expected_size is not None else None
+    for frame in frames:
+        tally.total += 1
+        if frame.error is not None or frame.image is None:
+            tally.reject(getattr(frame.error, "reason", None) or "unreadable")
+            continue
+        img = frame.image
+        if img.ndim < 2 or img.size == 0:
+            tally.reject("empty")
+            continue
+        this = (int(img.shape[1]), int(img.shape[0]))
+        if size is None:
+            size = this
+        elif this != size:
+            tally.reject("size_mismatch")
+            continue
+        yield frame, img
+
+
+def robot_from_topic(topic: str | None) -> str | None:
+    """``/autobot01/camera_node/image/compressed`` -> ``autobot01``."""
+    if not topic:
+        return None
+    m = re.match(r"^/([A-Za-z0-9_]+)/camera_node/", topic)
+    return m.group(1) if m else None
+
+
+def _robot_name(robot: str | None, source) -> str:
+    if robot:
+        return robot
+    guess = robot_from_topic(getattr(source, "topic", None))
+    if guess:
+        return guess
+    raise DtscalError(
+        "cannot tell which robot this is from the source; pass --robot NAME "
+        "(the calibration is written as camera_intrinsic/NAME.yaml)"
+    )
+
+
+@dataclass
+class IntrinsicRun:
+    result: CalibrationResult
+    robot: str
+    tally: FrameTally
+    samples: int
+    bars: list
+    source: str
+    path: Path | None = None
+
+    def to_dict(self) -> dict:
+        out = self.result.to_dict()
+        out.update(
+            robot=self.robot,
+            source=self.source,
+            samples_used=self.samples,
+            frames=self.tally.to_dict(),
+            coverage={b.name: round(float(b.progress), 4) for b in self.bars},
+            output=str(self.path) if self.path else None,
+        )
+        return out
+
+
+def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model: str = "plumb_bob",
+                         skew: bool = False, robot: str | None = None, out_dir=None, topic: str | None = None,
+                         progress: Callable[[Iterable], Iterable] | None = None) -> IntrinsicRun:
+    """Detect the board in every frame of a source, select samples, calibrate, write the YAML.
+
+    Streams (bags, videos) use ROS's coverage rule: a detection becomes a sample only when
+    its (X, Y, Size, Skew) is more than 0.2 (L1) from every sample so far. A folder of
+    still images uses every view in which the board is found.
+
+    Parameters
+    ----------
+    source_spec : path of a ROS 1 bag, a video, a folder or a glob of images
+    out_dir : the ``calibrations`` folder; ``out_dir/camera_intrinsic/<robot>.yaml`` is written.
+        ``None`` writes nothing.
+    progress : optional wrapper around the frame iterator (e.g. tqdm)
+    """
+    src = open_source(source_spec, topic=topic)
+    robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
+    tally = FrameTally()
+    tracker: CoverageTracker | None = None
+    stills_obj: list[np.ndarray] = []
+    stills_img: list[np.ndarray] = []
+    size = None
+    frames = progress(src) if progress else src
+    for frame, img in usable_images(frames, tally):
+        if size is None:
+            size = (int(img.shape[1]), int(img.shape[0]))
+            tracker = CoverageTracker(board, size)
+        try:
+            det = detect_board(img, board)
+        except DtscalError as exc:  # a frame the detector cannot take: count it, go on
+            tally.reject(getattr(exc, "reason", "bad_frame"))
+            continue
+        if not det.found:
+            tally.reject(det.reason or "no_board")
+            continue
+        if src.is_stream:
+            if tracker.offer(det):
+                tally.used += 1
+            else:
+                tally.reject("not_new_coverage")
+        else:
+            tracker.offer(det)  # keeps the bars meaningful for stills too
+            stills_obj.append(board.object_points())
+            stills_img.append(det.corners)
+            tally.used += 1
+    if size is None:
+        raise DtscalError(f"{src.describe()}: no readable frame ({tally.total} frames, rejected: "
+                          f"{dict(tally.rejected) or 'none'}); check the path and the topic")
+    if src.is_stream:
+        obj, imgp = tracker.object_and_image_points()
+    else:
+        obj, imgp = stills_obj, stills_img
+    if len(obj) < MIN_SAMPLES:
+        raise CalibrationError(
+            f"only {len(obj)} usable view(s) of the {board.describe()} board in {src.describe()} "
+            f"({tally.total} frames; rejected: {dict(tally.rejected)}). Calibration needs at least "
+            f"{MIN_SAMPLES} views at different positions and tilts: check --board/--square, and show the "
+            "whole board (not touching the image border) at several places and angles"
+        )
+    result = calibrate(obj, imgp, size, model=model, skew=skew)
+    run = IntrinsicRun(result, robot_name, tally, len(obj), tracker.bars(), src.describe())
+    if out_dir is not None:
+        calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
+        run.path = calib_files.save_intrinsics(calib, out_dir, robot_name)
+    return run
+
+
+@dataclass
+class ExtrinsicRun:
+    robot: str
+    H: np.ndarray
+    frame_index: int
+    tally: FrameTally
+    residual_mm: np.ndarray
+    image_center_ground: np.ndarray
+    source: str
+    path: Path | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "robot": self.robot,
+            "source": self.source,
+            "homography": [float(v) for v in self.H.ravel()],
+            "frame_index": self.frame_index,
+            "image_center_ground_m": [float(v) for v in self.image_center_ground],
+            "corner_residual_mm": {"max": float(np.max(self.residual_mm)), "mean": float(np.mean(self.residual_mm))},
+            "frames": self.tally.to_dict(),
+            "output": str(self.path) if self.path else None,
+        }
+
+
+def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIETOWN_BOARD,
+                         robot: str | None = None, out_dir=None, topic: str | None = None,
+                         progress=None) -> ExtrinsicRun:
+    """Duckietown's extrinsic procedure on the first usable frame of a source.
+
+    ``intrinsics_file`` is a Duckietown intrinsic YAML; the homography maps pixels of the
+    image rectified with that file's ``P`` to ground metres (robot frame: x forward,
+    y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given.
+    """
+    from .ground import calibrate_extrinsics as fit_on_image
+
+    calib = calib_files.load_intrinsics(intrinsics_file)
+    camera = calib.camera()
+    src = open_source(source_spec, topic=topic)
+    robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
+    tally = FrameTally()
+    frames = progress(src) if progress else src
+    last_error = None
+    for frame, img in usable_images(frames, tally):
+        try:
+            res = fit_on_image(img, camera, board)
+        except DtscalError as exc:
+            tally.reject(getattr(exc, "reason", None) or "no_board")
+            last_error = exc
+            continue
+        tally.used += 1
+        run = ExtrinsicRun(robot_name, res.H, frame.index, tally, np.asarray(res.residual_mm),
+                           np.asarray(res.image_center_ground), src.describe())
+        if out_dir is not None:
+            run.path = calib_files.save_extrinsics(res.H, out_dir, robot_name)
+        return run
+    raise CalibrationError(
+        f"no frame of {src.describe()} gave a ground homography ({tally.total} frames; rejected: "
+        f"{dict(tally.rejected)})" + (f"; last problem: {last_error}" if last_error else "")
+        + ". Place the robot on the board as in the Duckietown procedure, with the whole board in view"
+    )
+
+
+__all__ = ["calibrate_intrinsics", "calibrate_extrinsics", "IntrinsicRun", "ExtrinsicRun", "FrameTally",
+           "usable_images", "robot_from_topic"]

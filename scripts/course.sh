@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Install the kit and open the course in JupyterLab on the bundled recorded Duckiebot session.
+# Extra arguments go to `dtscal course` (e.g. --no-browser --port 8890).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+if [ ! -f data/session/intrinsics.bag ]; then
+  echo "the recorded session is missing; regenerating it into data/ (about a minute)" >&2
+  .venv/bin/dtscal synth --out data
+fi
+exec .venv/bin/dtscal course "$@"
