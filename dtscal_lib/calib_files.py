@@ -1,0 +1,563 @@
+"""Duckietown calibration files: read, validate and write them safely.
+
+A Duckiebot keeps its camera calibration in its config folder ``calibrations/``:
+
+* ``camera_intrinsic/<ROBOT>.yaml``: a ROS ``CameraInfo`` YAML exactly as
+  ``camera_calibration_parsers`` writes it (``image_width``, ``image_height``,
+  ``camera_name``, ``camera_matrix``, ``distortion_model``, ``distortion_coefficients``,
+  ``rectification_matrix``, ``projection_matrix``; every matrix as ``{rows, cols, data}``).
+* ``camera_extrinsic/<ROBOT>.yaml``: ``homography: [h11, ..., h33]``, the row-major
+  ground homography from *rectified* pixels to ground metres (robot frame, x forward,
+  y left).
+
+Beside each ``<ROBOT>.yaml`` sits the factory ``default.yaml``, which the robot falls
+back to and which is never overwritten (:func:`write_defaults` only creates it when it
+is missing).
+
+Reading uses ``yaml.safe_load`` only: a file with a Python tag
+(``!!python/object/apply:...``) is refused, nothing in it runs. Every value is checked
+(finite numbers, matrix sizes, a plausible ``K``, a rotation ``R``, a ``P`` of the form
+``[K' | t]``, a non-singular, non-corrupt homography) and every error names the file and
+the field.
+
+Writing is atomic: the new content goes to a temporary file in the same folder, is
+flushed and fsync'ed, and replaces ``<ROBOT>.yaml`` with ``os.replace``. The previous
+``<ROBOT>.yaml`` is kept as ``<ROBOT>.yaml.bak`` (the last one only). A failed write
+leaves the previous file as it was and removes the temporary file.
+
+Examples
+--------
+>>> import tempfile
+>>> from dtscal_lib import duckietown as dt
+>>> d = tempfile.mkdtemp()
+>>> paths = write_defaults(d)
+>>> calib = load_intrinsics(intrinsic_path(d, "default"))
+>>> calib.to_dict() == dt.DEFAULT_INTRINSICS
+True
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from . import duckietown as dt
+from .camera import CameraModel, as_dist
+from .errors import CalibrationFileError, DtscalError
+
+#: distortion models a file may declare, with their number of coefficients
+SUPPORTED_MODELS = {"plumb_bob": 5}
+#: ROS models recognised but not supported here, with what to do instead
+_UNSUPPORTED_MODELS = {
+    "rational_polynomial": "it has 8 coefficients (k4..k6 in a denominator) that dtscal's camera model "
+                           "does not implement; recalibrate with the default plumb_bob model",
+    "equidistant": "it is the fisheye model, which dtscal does not implement; "
+                   "recalibrate with the default plumb_bob model",
+}
+#: order of the keys in a ROS CameraInfo YAML (as the shipped default.yaml)
+INTRINSIC_KEYS = ("image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
+                  "distortion_coefficients", "rectification_matrix", "projection_matrix")
+
+_ROBOT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+# tolerances of the plausibility checks
+_ROT_TOL = 1e-6
+_MAX_SKEW_RATIO = 0.05   # |s| / fx
+_MAX_ASPECT = 5.0        # max(fx/fy, fy/fx)
+
+
+# --------------------------------------------------------------------------- paths
+def _check_robot(robot: str) -> str:
+    if not isinstance(robot, str) or not robot:
+        raise CalibrationFileError(f"robot name must be a non-empty string, got {robot!r}; pass --robot NAME")
+    if robot == dt.DEFAULT_NAME:
+        raise CalibrationFileError(
+            "default.yaml is the factory calibration and is never overwritten; pass --robot NAME"
+        )
+    if not _ROBOT_NAME.fullmatch(robot) or ".." in robot:
+        raise CalibrationFileError(
+            f"robot name {robot!r} is not valid: use letters, digits, '_', '-' and '.', without path "
+            "separators or '..' (the name of the Duckiebot, e.g. --robot autobot01)"
+        )
+    return robot
+
+
+def _file_name(robot: str) -> str:
+    if robot == dt.DEFAULT_NAME:
+        return f"{robot}.yaml"
+    return f"{_check_robot(robot)}.yaml"
+
+
+def intrinsic_path(out_dir, robot: str) -> Path:
+    """``out_dir/camera_intrinsic/<robot>.yaml`` (``out_dir`` is the robot's ``calibrations/``).
+
+    ``robot`` may be ``"default"`` here (to read the factory file); it may not contain
+    path separators.
+    """
+    return Path(out_dir) / "camera_intrinsic" / _file_name(robot)
+
+
+def extrinsic_path(out_dir, robot: str) -> Path:
+    """``out_dir/camera_extrinsic/<robot>.yaml`` (``out_dir`` is the robot's ``calibrations/``)."""
+    return Path(out_dir) / "camera_extrinsic" / _file_name(robot)
+
+
+# --------------------------------------------------------------------------- field validation
+def _fail(where: str, msg: str) -> CalibrationFileError:
+    return CalibrationFileError(f"{where}: {msg}")
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _number(x, where: str, field: str) -> float:
+    """One finite number from YAML; strings, bools, null, NaN and inf are refused."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        hint = ""
+        if isinstance(x, str):
+            try:
+                float(x)
+                hint = (" (YAML 1.1 reads a number such as 1e-05 without a '.' in the mantissa as text; "
+                        "write it as 1.0e-05, unquoted)")
+            except ValueError:
+                hint = "; write a plain number, unquoted"
+        raise _fail(where, f"{field} is {type(x).__name__} {x!r}, expected a number{hint}")
+    v = float(x)
+    if not math.isfinite(v):
+        raise _fail(where, f"{field} is {x!r}; every value must be a finite number (NaN/inf usually mean "
+                           "the calibration failed: recalibrate)")
+    return v
+
+
+def _matrix(doc: dict, key: str, rows: int, cols: int | None, where: str) -> np.ndarray:
+    """A ``{rows, cols, data}`` matrix of the ROS layout, (rows, cols) float64."""
+    if key not in doc:
+        raise _fail(where, f"missing field {key!r} (a ROS CameraInfo YAML has {', '.join(INTRINSIC_KEYS)})")
+    m = doc[key]
+    if not isinstance(m, dict):
+        raise _fail(where, f"{key} must be a mapping with rows, cols and data, got {type(m).__name__}")
+    for sub in ("rows", "cols", "data"):
+        if sub not in m:
+            raise _fail(where, f"{key} has no {sub!r}; expected rows, cols and data")
+    r, c, data = m["rows"], m["cols"], m["data"]
+    for name, val in (("rows", r), ("cols", c)):
+        if not _is_int(val) or val <= 0:
+            raise _fail(where, f"{key}.{name} is {val!r}, expected a positive integer")
+    if r != rows or (cols is not None and c != cols):
+        want = f"{rows}x{cols}" if cols is not None else f"{rows} row(s)"
+        raise _fail(where, f"{key} is {r}x{c}, expected {want}")
+    if not isinstance(data, list):
+        raise _fail(where, f"{key}.data must be a list of numbers, got {type(data).__name__}")
+    if len(data) != r * c:
+        raise _fail(where, f"{key}.data has {len(data)} values; expected rows*cols = {r * c}")
+    vals = [_number(v, where, f"{key}.data[{i}]") for i, v in enumerate(data)]
+    return np.array(vals, dtype=np.float64).reshape(r, c)
+
+
+def _check_intrinsic_values(width, height, K, model, D, R, P, where: str) -> None:
+    """Plausibility of already-parsed intrinsic values; raises CalibrationFileError."""
+    for name, val in (("image_width", width), ("image_height", height)):
+        if not _is_int(val) or val <= 0:
+            raise _fail(where, f"{name} is {val!r}, expected a positive integer (pixels)")
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise _fail(where, "camera_matrix must be a finite 3x3 matrix")
+    fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
+    if fx <= 0 or fy <= 0:
+        raise _fail(where, f"camera_matrix has fx = {fx:g}, fy = {fy:g}; focal lengths must be positive "
+                           "(data = [fx, s, cx, 0, fy, cy, 0, 0, 1])")
+    if max(fx / fy, fy / fx) > _MAX_ASPECT:
+        raise _fail(where, f"camera_matrix has fx = {fx:g} and fy = {fy:g}, an aspect ratio beyond "
+                           f"{_MAX_ASPECT:g}; not a plausible camera: recalibrate")
+    if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+        raise _fail(where, "camera_matrix must look like [fx, s, cx, 0, fy, cy, 0, 0, 1]; "
+                           f"its data is {K.ravel().tolist()}")
+    if not (0 <= cx <= width and 0 <= cy <= height):
+        raise _fail(where, f"camera_matrix principal point ({cx:g}, {cy:g}) lies outside the "
+                           f"{width}x{height} image; check image_width/image_height or recalibrate")
+    if abs(s) > _MAX_SKEW_RATIO * fx:
+        raise _fail(where, f"camera_matrix skew s = {s:g} is implausibly large (|s| > {_MAX_SKEW_RATIO:g} fx); "
+                           "real cameras have s close to 0: recalibrate")
+    if model in _UNSUPPORTED_MODELS:
+        raise _fail(where, f"distortion_model {model!r} is not supported: {_UNSUPPORTED_MODELS[model]}")
+    if model not in SUPPORTED_MODELS:
+        raise _fail(where, f"distortion_model is {model!r}; expected one of {sorted(SUPPORTED_MODELS)}")
+    n = SUPPORTED_MODELS[model]
+    if D.shape != (n,) or not np.all(np.isfinite(D)):
+        raise _fail(where, f"distortion_coefficients has {D.size} values; {model} needs {n} "
+                           "[k1, k2, p1, p2, k3]")
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise _fail(where, "rectification_matrix must be a finite 3x3 matrix")
+    ortho = np.abs(R @ R.T - np.eye(3)).max()
+    det = np.linalg.det(R)
+    if ortho > _ROT_TOL or abs(det - 1) > _ROT_TOL:
+        raise _fail(where, f"rectification_matrix is not a rotation (|R R^T - I| = {ortho:.3g}, det = {det:.9g}; "
+                           "both must be within 1e-6 of a rotation's); a single camera uses the identity")
+    if P.shape != (3, 4) or not np.all(np.isfinite(P)):
+        raise _fail(where, "projection_matrix must be a finite 3x4 matrix")
+    if not np.array_equal(P[2], [0.0, 0.0, 1.0, 0.0]):
+        raise _fail(where, f"projection_matrix third row is {P[2].tolist()}; expected [0, 0, 1, 0] "
+                           "(P = [K' | t] with K' the rectified camera matrix)")
+    if P[0, 0] <= 0 or P[1, 1] <= 0:
+        raise _fail(where, f"projection_matrix has fx' = {P[0, 0]:g}, fy' = {P[1, 1]:g}; "
+                           "they must be positive")
+
+
+# --------------------------------------------------------------------------- intrinsics
+@dataclass(frozen=True, eq=False)
+class IntrinsicCalibration:
+    """The content of a ``camera_intrinsic/<ROBOT>.yaml`` file, validated.
+
+    Attributes
+    ----------
+    camera_name : str
+    width, height : int, image size in pixels
+    K : (3, 3) float64 camera matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``
+    distortion_model : str, ``"plumb_bob"``
+    D : (5,) float64 ``[k1, k2, p1, p2, k3]``
+    R : (3, 3) float64 rectification rotation (identity for a single camera)
+    P : (3, 4) float64 projection matrix ``[K' | t]`` of the rectified image
+    """
+
+    camera_name: str
+    width: int
+    height: int
+    K: np.ndarray
+    distortion_model: str
+    D: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+
+    def __post_init__(self):
+        where = f"IntrinsicCalibration({self.camera_name!r})"
+        if not isinstance(self.camera_name, str):
+            raise _fail(where, f"camera_name must be a string, got {type(self.camera_name).__name__}")
+        arrays = {}
+        for name, shape in (("K", (3, 3)), ("D", None), ("R", (3, 3)), ("P", (3, 4))):
+            try:
+                a = np.array(getattr(self, name), dtype=np.float64)
+            except (TypeError, ValueError):
+                raise _fail(where, f"{name} must be numeric") from None
+            if name == "D":
+                a = a.ravel()
+            if shape is not None and a.shape != shape:
+                raise _fail(where, f"{name} must have shape {shape}, got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise _fail(where, f"{name} contains NaN or infinite values")
+            a.setflags(write=False)
+            arrays[name] = a
+        _check_intrinsic_values(self.width, self.height, arrays["K"], self.distortion_model,
+                                arrays["D"], arrays["R"], arrays["P"], where)
+        for name, a in arrays.items():
+            object.__setattr__(self, name, a)
+
+    def __eq__(self, other):
+        if not isinstance(other, IntrinsicCalibration):
+            return NotImplemented
+        return (self.camera_name == other.camera_name and self.width == other.width
+                and self.height == other.height and self.distortion_model == other.distortion_model
+                and all(np.array_equal(getattr(self, n), getattr(other, n)) for n in "KDRP"))
+
+    __hash__ = None  # arrays inside: not hashable
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(width, height)``."""
+        return (self.width, self.height)
+
+    def camera(self) -> CameraModel:
+        """The :class:`~dtscal_lib.camera.CameraModel` of this file (``P`` as stored).
+
+        Raises
+        ------
+        CalibrationFileError
+            If ``R`` is not the identity: :class:`CameraModel` describes a single camera
+            without a rectification rotation, as every Duckiebot file has.
+        """
+        if not np.allclose(self.R, np.eye(3), atol=1e-9, rtol=0):
+            raise CalibrationFileError(
+                f"camera {self.camera_name!r}: rectification_matrix is not the identity (a stereo "
+                "rectification); dtscal's camera model handles single cameras only"
+            )
+        try:
+            return CameraModel(self.K, self.D, (self.width, self.height), "plumb_bob", self.P)
+        except DtscalError as e:
+            raise CalibrationFileError(f"camera {self.camera_name!r}: {e}") from e
+
+    def to_dict(self) -> dict:
+        """The ROS ``CameraInfo`` YAML layout, keys in the order of the shipped ``default.yaml``.
+
+        Integral values are written as ints (``0``, ``1``) as ROS does; other values as
+        Python floats, which ``yaml.safe_dump`` writes with ``repr`` and so round-trip exactly.
+        """
+        def mat(a: np.ndarray) -> dict:
+            a = np.atleast_2d(a)
+            return {"rows": int(a.shape[0]), "cols": int(a.shape[1]), "data": [_plain(v) for v in a.ravel()]}
+
+        return {
+            "image_width": int(self.width),
+            "image_height": int(self.height),
+            "camera_name": self.camera_name,
+            "camera_matrix": mat(self.K),
+            "distortion_model": self.distortion_model,
+            "distortion_coefficients": mat(self.D.reshape(1, -1)),
+            "rectification_matrix": mat(self.R),
+            "projection_matrix": mat(self.P),
+        }
+
+    @classmethod
+    def from_camera(cls, camera: CameraModel, camera_name: str) -> "IntrinsicCalibration":
+        """The file content for a calibrated camera: ``R = I``, ``P = camera.P``.
+
+        A ``radial2`` camera is written as ``plumb_bob`` with ``p1 = p2 = k3 = 0``.
+        """
+        if not isinstance(camera, CameraModel):
+            raise CalibrationFileError(f"from_camera needs a CameraModel, got {type(camera).__name__}")
+        w, h = camera.size
+        return cls(str(camera_name), int(w), int(h), camera.K, "plumb_bob", as_dist(camera.dist),
+                   np.eye(3), camera.P)
+
+    @classmethod
+    def from_dict(cls, doc: Any, where: str = "<dict>") -> "IntrinsicCalibration":
+        """Validate a parsed ROS ``CameraInfo`` YAML mapping; ``where`` names it in errors."""
+        if not isinstance(doc, dict):
+            raise _fail(where, f"expected a mapping of ROS CameraInfo fields, got {type(doc).__name__}")
+        missing = [k for k in INTRINSIC_KEYS if k not in doc]
+        if missing:
+            raise _fail(where, f"missing field(s) {', '.join(missing)}; a ROS CameraInfo YAML has "
+                               f"{', '.join(INTRINSIC_KEYS)}")
+        width, height = doc["image_width"], doc["image_height"]
+        for name, val in (("image_width", width), ("image_height", height)):
+            if not _is_int(val) or val <= 0:
+                raise _fail(where, f"{name} is {val!r}, expected a positive integer (pixels)")
+        name = doc["camera_name"]
+        if not isinstance(name, str):
+            raise _fail(where, f"camera_name is {name!r}, expected a string")
+        model = doc["distortion_model"]
+        if not isinstance(model, str):
+            raise _fail(where, f"distortion_model is {model!r}, expected a string such as plumb_bob")
+        if model in _UNSUPPORTED_MODELS:
+            raise _fail(where, f"distortion_model {model!r} is not supported: {_UNSUPPORTED_MODELS[model]}")
+        if model not in SUPPORTED_MODELS:
+            raise _fail(where, f"distortion_model is {model!r}; expected one of {sorted(SUPPORTED_MODELS)}")
+        K = _matrix(doc, "camera_matrix", 3, 3, where)
+        D = _matrix(doc, "distortion_coefficients", 1, SUPPORTED_MODELS[model], where).ravel()
+        R = _matrix(doc, "rectification_matrix", 3, 3, where)
+        P = _matrix(doc, "projection_matrix", 3, 4, where)
+        _check_intrinsic_values(width, height, K, model, D, R, P, where)
+        return cls(name, width, height, K, model, D, R, P)
+
+
+def _plain(v: float) -> int | float:
+    """A float as YAML should see it: an int when integral (and not -0.0), else a float."""
+    v = float(v)
+    if v.is_integer() and abs(v) < 2**53 and not (v == 0 and math.copysign(1.0, v) < 0):
+        return int(v)
+    return v
+
+
+# --------------------------------------------------------------------------- reading
+def _read_yaml(path) -> tuple[Any, str]:
+    p = Path(path)
+    where = str(p)
+    if not p.exists():
+        raise _fail(where, "file not found; check the robot name and the calibrations folder "
+                           "(it holds camera_intrinsic/ and camera_extrinsic/)")
+    if not p.is_file():
+        raise _fail(where, "is not a file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise _fail(where, f"cannot be read ({e})") from e
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.constructor.ConstructorError as e:
+        problem = getattr(e, "problem", "") or ""
+        if "constructor for the tag" not in problem:
+            raise _fail(where, f"is not valid calibration YAML: {problem}; fix the file or restore it "
+                               "from default.yaml") from None
+        tag = problem.split("tag", 1)[1].strip()
+        raise _fail(where, f"contains a non-data tag ({tag}) and was not loaded (nothing in it was run); "
+                           "a calibration file holds only numbers, strings, lists and mappings. Do not use "
+                           "this file: restore it from default.yaml or recalibrate") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise _fail(where, f"is not valid YAML{at}: {problem}; fix the file or restore it "
+                           "from default.yaml") from None
+    if doc is None:
+        raise _fail(where, "is empty; restore it from default.yaml or recalibrate")
+    if not isinstance(doc, dict):
+        raise _fail(where, f"must be a YAML mapping (key: value lines), got a {type(doc).__name__}")
+    return doc, where
+
+
+def load_intrinsics(path) -> IntrinsicCalibration:
+    """Read and validate a ``camera_intrinsic/<ROBOT>.yaml`` (ROS CameraInfo YAML).
+
+    Raises
+    ------
+    CalibrationFileError
+        Naming the file and the field: missing file, YAML syntax error, a non-data
+        (Python) tag, missing fields, wrong sizes, non-numbers, NaN/inf, implausible
+        ``K``, unknown distortion model, non-rotation ``R``, malformed ``P``.
+    """
+    doc, where = _read_yaml(path)
+    return IntrinsicCalibration.from_dict(doc, where)
+
+
+def validate_homography(H, where: str = "homography") -> np.ndarray:
+    """Check a ground homography (rectified pixel -> ground metres); returns (3, 3) float64.
+
+    Refuses non-finite, singular and corrupt (``H[1][2] > 0``, Duckietown's rule)
+    homographies with a :class:`CalibrationFileError` naming ``where``.
+    """
+    H = np.asarray(H, dtype=np.float64)
+    if H.size != 9:
+        raise _fail(where, f"homography has {H.size} values; expected 9 (row-major 3x3)")
+    H = H.reshape(3, 3)
+    if not np.all(np.isfinite(H)):
+        raise _fail(where, "homography contains NaN or infinite values; recalibrate the extrinsics")
+    sv = np.linalg.svd(H, compute_uv=False)
+    if sv[0] == 0 or sv[-1] / sv[0] < 1e-14:
+        raise _fail(where, "homography is singular (it maps the image onto a line or a point); "
+                           "recalibrate the extrinsics")
+    if dt.homography_is_corrupt(H):
+        raise _fail(where, f"homography has H[1][2] = {H[1, 2]:g} > 0, which Duckietown rejects as corrupt: "
+                           "with H[2][2] = 1, (H[0][2], H[1][2]) is where the image's top-left pixel lands "
+                           "on the ground; that pixel is above the horizon and lands behind the robot on its "
+                           "right (y < 0) when the board was seen the right way round. A positive value "
+                           "usually means mirrored or mis-ordered corners: place the board as instructed "
+                           "and recalibrate")
+    return H
+
+
+def load_extrinsics(path) -> np.ndarray:
+    """Read and validate a ``camera_extrinsic/<ROBOT>.yaml``.
+
+    Returns
+    -------
+    (3, 3) float64 homography, rectified pixels -> ground metres (x forward, y left).
+    """
+    doc, where = _read_yaml(path)
+    if "homography" not in doc:
+        raise _fail(where, "missing field 'homography' (expected homography: [9 numbers, row-major])")
+    data = doc["homography"]
+    if not isinstance(data, list):
+        raise _fail(where, f"homography must be a list of 9 numbers, got {type(data).__name__}")
+    if len(data) != 9:
+        raise _fail(where, f"homography has {len(data)} values; expected 9 (row-major 3x3)")
+    vals = [_number(v, where, f"homography[{i}]") for i, v in enumerate(data)]
+    return validate_homography(vals, where)
+
+
+# --------------------------------------------------------------------------- writing
+def _dump(doc: dict) -> str:
+    # default_flow_style=None: lists of numbers in [..], mappings as blocks, like the robot's files
+    return yaml.safe_dump(doc, default_flow_style=None, sort_keys=False, width=4096)
+
+
+def _atomic_write(path: Path, text: str, *, backup: bool = True) -> Path:
+    """Write ``text`` to ``path`` atomically; keep the previous file as ``path.bak``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        if backup and path.exists():
+            bak = path.with_name(path.name + ".bak")
+            fd2, tmp_bak = tempfile.mkstemp(prefix=f".{bak.name}.", suffix=".tmp", dir=path.parent)
+            os.close(fd2)
+            try:
+                shutil.copy2(path, tmp_bak)
+                os.replace(tmp_bak, bak)
+            finally:
+                if os.path.exists(tmp_bak):
+                    os.unlink(tmp_bak)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    _fsync_dir(path.parent)
+    return path
+
+
+def _fsync_dir(d: Path) -> None:
+    try:
+        fd = os.open(d, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _write(path: Path, doc: dict, backup: bool = True) -> Path:
+    try:
+        text = _dump(doc)
+        return _atomic_write(path, text, backup=backup)
+    except OSError as e:
+        raise CalibrationFileError(f"{path}: could not be written ({e}); the previous file is unchanged. "
+                                   "Check that the folder exists and is writable") from e
+
+
+def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str) -> Path:
+    """Write ``out_dir/camera_intrinsic/<robot>.yaml`` atomically (previous one kept as ``.bak``).
+
+    Refuses ``robot == "default"``: the factory file is never overwritten.
+    """
+    _check_robot(robot)
+    if not isinstance(calib, IntrinsicCalibration):
+        raise CalibrationFileError(f"save_intrinsics needs an IntrinsicCalibration, got {type(calib).__name__}")
+    return _write(intrinsic_path(out_dir, robot), calib.to_dict())
+
+
+def save_extrinsics(H, out_dir, robot: str) -> Path:
+    """Write ``out_dir/camera_extrinsic/<robot>.yaml`` (``homography: [9 floats]``) atomically.
+
+    ``H`` (3, 3) maps rectified pixels to ground metres; it is validated (finite,
+    non-singular, not corrupt) before anything is written. Refuses ``robot == "default"``.
+    """
+    _check_robot(robot)
+    path = extrinsic_path(out_dir, robot)
+    H = validate_homography(H, f"{path} (not written)")
+    return _write(path, {"homography": [_plain(v) for v in H.ravel()]})
+
+
+def write_defaults(out_dir) -> list[Path]:
+    """Create the factory ``default.yaml`` files under ``out_dir`` where they are missing.
+
+    Writes ``camera_intrinsic/default.yaml`` and ``camera_extrinsic/default.yaml`` with
+    the values of :mod:`dtscal_lib.duckietown`; an existing ``default.yaml`` is never
+    touched.
+
+    Returns
+    -------
+    list of Path
+        The files written (empty when both already existed).
+    """
+    written = []
+    ip = intrinsic_path(out_dir, dt.DEFAULT_NAME)
+    if not ip.exists():
+        doc = IntrinsicCalibration.from_dict(dt.DEFAULT_INTRINSICS, "duckietown.DEFAULT_INTRINSICS").to_dict()
+        written.append(_write(ip, doc, backup=False))
+    ep = extrinsic_path(out_dir, dt.DEFAULT_NAME)
+    if not ep.exists():
+        validate_homography(dt.DEFAULT_HOMOGRAPHY, "duckietown.DEFAULT_HOMOGRAPHY")
+        written.append(_write(ep, {"homography": list(dt.DEFAULT_HOMOGRAPHY)}, backup=False))
+    return written

@@ -1,0 +1,479 @@
+"""Ground homography: extrinsic calibration the Duckietown way, pixel <-> ground, bird's-eye view.
+
+The ground plane is the robot frame's ``z = 0`` plane: origin below the midpoint of the
+drive wheels, **x forward, y left**, in metres. A plane seen by a pinhole camera is
+related to the (rectified, i.e. undistorted) image by a homography, the seed's eq. (13):
+
+    s [x, y, 1]^T = H [u, v, 1]^T
+
+``H`` (3, 3) maps *rectified* pixels to ground metres, as Duckietown's
+``camera_extrinsic/<ROBOT>.yaml`` stores it. A raw (distorted) camera pixel is first
+rectified (``undistortPoints`` with ``R`` and ``P``), then mapped with ``H``.
+
+The extrinsic procedure (:func:`calibrate_extrinsics`) follows ``dts duckiebot
+calibrate_extrinsics``: one frame of the 7x5-corner, 31 mm board lying flat in front of
+the robot (near row of inner corners at x = 0.191 m, centred), resized to width 640,
+rectified with the intrinsic calibration, corners detected and ordered from the
+near-right corner, ``cv2.findHomography(..., RANSAC)``, and Duckietown's ``H[1][2] > 0``
+corruption check.
+
+Notes
+-----
+A homography maps the whole projective plane: pixels *above the horizon* also get a
+ground point (behind the robot, mirrored). :func:`pixel_to_ground` does not refuse
+them, as Duckietown's ground projection does not; use pixels of the ground only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from . import duckietown as dt
+from .boards import DUCKIETOWN_BOARD, GROUND_NEAR_ROW_X, Board, ground_points, order_for_ground
+from .camera import CameraModel, rectify_image
+from .errors import CalibrationError, DtscalError
+
+#: default RANSAC inlier threshold, metres on the ground (Duckietown passes OpenCV's
+#: default of 3, which in metres rejects nothing; 1 cm rejects a mis-detected corner)
+RANSAC_THRESHOLD_M = 0.01
+
+
+# --------------------------------------------------------------------------- checks
+def _points(a, name: str) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim == 1 and arr.size == 2:
+        arr = arr.reshape(1, 2)
+    if arr.ndim == 3 and arr.shape[1] == 1:
+        arr = arr.reshape(-1, arr.shape[2])
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise DtscalError(f"{name} must have shape (N, 2), got {np.shape(a)}")
+    if not np.all(np.isfinite(arr)):
+        raise DtscalError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+def _homography(H, name: str = "H") -> np.ndarray:
+    H = np.asarray(H, dtype=np.float64)
+    if H.size != 9:
+        raise DtscalError(f"{name} must be a 3x3 homography (or 9 row-major values), got shape {H.shape}")
+    H = H.reshape(3, 3)
+    if not np.all(np.isfinite(H)):
+        raise DtscalError(f"{name} contains NaN or infinite values")
+    return H
+
+
+# --------------------------------------------------------------------------- estimation
+def estimate_ground_homography(pixels, ground, *, method: str | int = "ransac",
+                               ransac_threshold: float = RANSAC_THRESHOLD_M) -> np.ndarray:
+    """Fit the homography from rectified pixels to ground points (``cv2.findHomography``).
+
+    Parameters
+    ----------
+    pixels : (N, 2) float64 rectified pixels, N >= 4
+    ground : (N, 2) float64 ground points, metres (x forward, y left)
+    method : ``"ransac"`` (Duckietown's choice, robust to a bad corner) or ``"lsq"``
+        (``0``: least squares on all points, then Levenberg-Marquardt refinement)
+    ransac_threshold : RANSAC inlier distance on the ground, metres
+
+    Returns
+    -------
+    (3, 3) float64 ``H`` with ``H[2, 2] = 1``
+
+    Raises
+    ------
+    CalibrationError
+        Fewer than 4 points, degenerate (collinear) points, or OpenCV finds no homography.
+
+    Examples
+    --------
+    >>> H = np.array([[0.0, -0.001, 0.3], [-0.001, 0.0, 0.32], [0.0, -0.01, 1.0]])
+    >>> px = np.array([[100.0, 300], [500, 300], [100, 450], [500, 450], [300, 380]])
+    >>> np.allclose(estimate_ground_homography(px, apply_homography(H, px)), H)
+    True
+    """
+    px = _points(pixels, "pixels")
+    gr = _points(ground, "ground points")
+    if len(px) != len(gr):
+        raise CalibrationError(f"got {len(px)} pixels but {len(gr)} ground points; they must pair up")
+    if len(px) < 4:
+        raise CalibrationError(f"a homography needs at least 4 point pairs, got {len(px)}")
+    if method in ("ransac", cv2.RANSAC):
+        if not (np.isfinite(ransac_threshold) and ransac_threshold > 0):
+            raise CalibrationError(f"ransac_threshold must be a positive distance in metres, got {ransac_threshold!r}")
+        H, mask = cv2.findHomography(px, gr, cv2.RANSAC, float(ransac_threshold))
+    elif method in ("lsq", 0):
+        H, mask = cv2.findHomography(px, gr, 0)
+    else:
+        raise CalibrationError(f"method must be 'ransac' or 'lsq', got {method!r}")
+    if H is None or not np.all(np.isfinite(H)) or abs(H[2, 2]) < 1e-12:
+        raise CalibrationError(
+            "no homography fits these points (are they collinear, or all in one spot?); the board's "
+            "corners must span an area of the image"
+        )
+    H = H / H[2, 2]
+    sv = np.linalg.svd(H, compute_uv=False)
+    if sv[-1] / sv[0] < 1e-14:
+        raise CalibrationError("the fitted homography is singular: the points are degenerate (collinear)")
+    return H
+
+
+# --------------------------------------------------------------------------- mapping
+def _apply(H: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Homogeneous products: returns (N, 3) ``H [p, 1]`` and the (N,) relative size of w."""
+    hom = pts @ H[:, :2].T + H[:, 2]
+    scale = np.abs(pts[:, 0] * H[2, 0]) + np.abs(pts[:, 1] * H[2, 1]) + abs(H[2, 2])
+    return hom, scale
+
+
+def apply_homography(H, pts) -> np.ndarray:
+    """Map points with a homography: ``[x, y, w]^T = H [u, v, 1]^T``, then ``(x / w, y / w)``.
+
+    Parameters
+    ----------
+    H : (3, 3) homography
+    pts : (N, 2) points (or a single (2,) point)
+
+    Returns
+    -------
+    (N, 2) float64 mapped points
+
+    Raises
+    ------
+    DtscalError
+        If a point maps to infinity (``w = 0``: for a ground homography, a pixel on
+        the horizon line).
+    """
+    H = _homography(H)
+    pts = _points(pts, "points")
+    hom, scale = _apply(H, pts)
+    w = hom[:, 2]
+    bad = np.abs(w) <= 1e-12 * scale
+    if np.any(bad):
+        raise DtscalError(
+            f"{int(bad.sum())} point(s) map to infinity under the homography (e.g. {pts[bad][0].tolist()}); "
+            "for a ground homography these pixels lie on the horizon, not on the ground"
+        )
+    return hom[:, :2] / w[:, None]
+
+
+def pixel_to_ground(H, uv_rectified) -> np.ndarray:
+    """Rectified pixels (N, 2) -> ground points (N, 2), metres (x forward, y left)."""
+    return apply_homography(H, uv_rectified)
+
+
+def ground_to_pixel(H, xy) -> np.ndarray:
+    """Ground points (N, 2), metres -> rectified pixels (N, 2), with ``H^-1``."""
+    H = _homography(H)
+    try:
+        Hinv = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        raise DtscalError("H is singular and cannot be inverted; recalibrate the extrinsics") from None
+    return apply_homography(Hinv, xy)
+
+
+def distorted_pixel_to_ground(camera: CameraModel, H, uv) -> np.ndarray:
+    """Raw camera pixels (N, 2) -> ground points (N, 2), metres.
+
+    Rectifies the points first (``undistortPoints`` with the camera's ``P``, as
+    Duckietown's ground projection does), then applies ``H``.
+    """
+    if not isinstance(camera, CameraModel):
+        raise DtscalError(f"camera must be a CameraModel, got {type(camera).__name__}")
+    return pixel_to_ground(H, camera.undistort_pixels(uv, rectified=True))
+
+
+# --------------------------------------------------------------------------- the procedure
+@dataclass
+class ExtrinsicResult:
+    """Outcome of :func:`calibrate_extrinsics`.
+
+    Attributes
+    ----------
+    H : (3, 3) float64 homography, rectified pixels -> ground metres, ``H[2, 2] = 1``
+    corners_rectified : (N, 2) float64 detected corners in the rectified image, ground order
+    ground : (N, 2) float64 ground coordinates of those corners, metres
+    residual_mm : (N,) float64 ``|H(corner) - ground|`` in millimetres
+    rectified : the rectified image (H x W [x 3] uint8) the corners were found in
+    image_center_ground : (2,) float64 ground point of the rectified image's centre, metres
+    """
+
+    H: np.ndarray
+    corners_rectified: np.ndarray
+    ground: np.ndarray
+    residual_mm: np.ndarray
+    rectified: np.ndarray
+    image_center_ground: np.ndarray
+
+    def to_dict(self) -> dict:
+        """Plain-Python summary (no image) for JSON/YAML reports."""
+        return {
+            "homography": [float(v) for v in self.H.ravel()],
+            "n_corners": int(len(self.corners_rectified)),
+            "residual_mm_mean": float(np.mean(self.residual_mm)),
+            "residual_mm_max": float(np.max(self.residual_mm)),
+            "residual_mm": [float(v) for v in self.residual_mm],
+            "corners_rectified": self.corners_rectified.tolist(),
+            "ground": self.ground.tolist(),
+            "image_center_ground": [float(v) for v in self.image_center_ground],
+        }
+
+
+def _check_image(image) -> np.ndarray:
+    if not isinstance(image, np.ndarray) or image.size == 0:
+        raise CalibrationError("expected a non-empty image array (H x W or H x W x 3)")
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
+        raise CalibrationError(f"expected a grey or colour image, got an array of shape {image.shape}")
+    if image.dtype != np.uint8:
+        raise CalibrationError(f"expected an 8-bit image (uint8), got {image.dtype}; convert it first")
+    return image
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    if image.ndim == 2:
+        return image
+    if image.shape[2] == 1:
+        return image[:, :, 0]
+    code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
+    return cv2.cvtColor(image, code)
+
+
+def resize_to_width(image: np.ndarray, width: int = dt.IMAGE_SIZE[0]) -> np.ndarray:
+    """Resize to ``width`` keeping the aspect ratio (Duckietown resizes to 640 wide); no-op if already."""
+    h, w = image.shape[:2]
+    if w == width:
+        return image
+    new_h = int(round(h * width / w))
+    interp = cv2.INTER_AREA if w > width else cv2.INTER_LINEAR
+    return cv2.resize(image, (int(width), new_h), interpolation=interp)
+
+
+def _classic_corners(gray: np.ndarray, board: Board) -> tuple[np.ndarray | None, str]:
+    """Duckietown's extrinsic detector: ``findChessboardCorners(ADAPTIVE_THRESH | NORMALIZE_IMAGE)``
+    (no ``FAST_CHECK``) on the whole rectified frame, ROS's 8 px border rule, ``cornerSubPix``
+    with a window of half the smallest corner spacing."""
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    ok, corners = cv2.findChessboardCorners(gray, board.pattern_size, flags=flags)
+    if not ok or corners is None:
+        return None, "no_board"
+    c = corners.reshape(-1, 2).astype(np.float64)
+    grid = c.reshape(board.rows, board.cols, 2)
+    spacing = min(np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
+                  np.linalg.norm(np.diff(grid, axis=0), axis=2).min())
+    r = int(max(2, np.ceil(spacing / 2)))
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 60, 1e-3)
+    refined = cv2.cornerSubPix(gray, c.reshape(-1, 1, 2).astype(np.float32), (r, r), (-1, -1), criteria)
+    c = refined.reshape(-1, 2).astype(np.float64)
+    h, w = gray.shape
+    m = dt.BORDER_MARGIN_PX
+    inside = (c[:, 0] > m) & (c[:, 0] < w - m) & (c[:, 1] > m) & (c[:, 1] < h - m)
+    return (c, "found") if inside.all() else (c, "at_border")
+
+
+def _find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, str]:
+    """Corners of the board in the rectified frame: ``(corners (N, 2) or None, reason)``.
+
+    ``reason`` is ``"found"``, ``"no_board"`` or ``"at_border"``. Uses
+    :func:`dtscal_lib.detect.detect_board` (the live detector) when that module exists;
+    when it finds nothing, falls back to the classic full-frame detector without
+    ``FAST_CHECK``, as Duckietown's extrinsic calibration runs it: on the rectified
+    image (smaller focal length than the raw one) the far squares of the board are only
+    about 12 px tall and ``FAST_CHECK`` can reject a board that is there. One still
+    frame, so the slower search costs nothing that matters.
+    """
+    try:
+        from .detect import detect_board
+    except ModuleNotFoundError as e:  # the detection module is optional here
+        if e.name != f"{__package__}.detect":
+            raise
+        detect_board = None
+    if detect_board is not None:
+        det = detect_board(image, board, border_margin=dt.BORDER_MARGIN_PX)
+        if det.found:
+            return np.asarray(det.corners, dtype=np.float64).reshape(-1, 2), "found"
+        if det.reason == "at_border":
+            return det.corners, "at_border"
+    return _classic_corners(_gray(image), board)
+
+
+def calibrate_extrinsics(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
+                         method: str = "ransac") -> ExtrinsicResult:
+    """Duckietown's extrinsic calibration from one frame of the board lying in front of the robot.
+
+    Steps: resize to the camera's width keeping the aspect ratio (640 for a Duckiebot),
+    rectify with the intrinsics (``initUndistortRectifyMap(K, D, I, P)``), detect the
+    board's inner corners, order them from the near-right corner
+    (:func:`~dtscal_lib.boards.order_for_ground`), pair them with
+    :func:`~dtscal_lib.boards.ground_points`, fit ``H`` and reject a corrupt one.
+
+    Parameters
+    ----------
+    image : H x W [x 3] uint8 raw (distorted) camera frame, BGR
+    camera : the intrinsic calibration (its ``P`` defines the rectified image)
+    board : the board on the ground (default: Duckietown's 7x5, 31 mm)
+    method : ``"ransac"`` or ``"lsq"``, see :func:`estimate_ground_homography`
+
+    Returns
+    -------
+    ExtrinsicResult
+
+    Raises
+    ------
+    CalibrationError
+        No board found, aspect ratio that does not match the camera, or a corrupt
+        homography (``H[1][2] > 0``).
+    """
+    if not isinstance(camera, CameraModel):
+        raise CalibrationError(f"camera must be a CameraModel, got {type(camera).__name__}")
+    image = _check_image(image)
+    cw, ch = camera.size
+    frame = resize_to_width(image, cw)
+    if frame.shape[:2] != (ch, cw):
+        raise CalibrationError(
+            f"the frame is {image.shape[1]}x{image.shape[0]}, which resized to width {cw} is "
+            f"{frame.shape[1]}x{frame.shape[0]}, but the camera was calibrated at {cw}x{ch}; "
+            "use frames from the calibrated camera mode"
+        )
+    rectified = rectify_image(frame, camera.rectification_maps())
+    corners, reason = _find_corners(rectified, board)
+    if reason == "at_border":
+        raise CalibrationError(
+            f"the board ({board.describe()}) was found but some corners are within {dt.BORDER_MARGIN_PX} px "
+            "of the rectified image's edge; place the robot on the board as instructed, centred, so that "
+            "the whole board is well inside the view"
+        )
+    if corners is None:
+        raise CalibrationError(
+            f"the board ({board.describe()}) was not found in the rectified image; place the robot on the "
+            "board as instructed (the board flat in front of the robot, fully in view, its long side across "
+            f"the view, the near row of inner corners {GROUND_NEAR_ROW_X} m ahead of the wheel axle), "
+            "with even lighting and no glare"
+        )
+    try:
+        ordered = order_for_ground(corners, board)
+    except DtscalError as e:
+        raise CalibrationError(str(e)) from e
+    ground = ground_points(board)
+    H = estimate_ground_homography(ordered, ground, method=method)
+    if dt.homography_is_corrupt(H):
+        raise CalibrationError(
+            f"the fitted homography has H[1][2] = {H[1, 2]:g} > 0, which Duckietown rejects as corrupt "
+            "(the board looks mirrored or rotated); place the board as instructed and try again"
+        )
+    residual_mm = 1000.0 * np.linalg.norm(pixel_to_ground(H, ordered) - ground, axis=1)
+    centre = np.array([[(cw - 1) / 2.0, (ch - 1) / 2.0]])
+    try:
+        centre_ground = pixel_to_ground(H, centre)[0]
+    except DtscalError:
+        raise CalibrationError("the image centre lies on the horizon of the fitted homography; "
+                               "the camera must look down at the ground") from None
+    return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground)
+
+
+# --------------------------------------------------------------------------- views
+def _ground_to_view(x_range, y_range, px_per_m) -> tuple[np.ndarray, tuple[int, int]]:
+    """Affine map ground metres -> bird's-eye pixel (x forward = up, y left = left), and (w, h)."""
+    (x0, x1), (y0, y1) = (tuple(map(float, x_range)), tuple(map(float, y_range)))
+    s = float(px_per_m)
+    if not (x1 > x0 and y1 > y0 and s > 0):
+        raise DtscalError(f"need x_range and y_range as (min, max) with min < max and px_per_m > 0; got "
+                          f"{x_range}, {y_range}, {px_per_m}")
+    w, h = int(round((y1 - y0) * s)), int(round((x1 - x0) * s))
+    if w * h > 25_000_000:
+        raise DtscalError(f"the bird's-eye image would be {w}x{h} pixels; lower px_per_m or the ranges")
+    # pixel centre (c, r) <-> y = y1 - (c + 0.5)/s, x = x1 - (r + 0.5)/s
+    A = np.array([[0.0, -s, y1 * s - 0.5],
+                  [-s, 0.0, x1 * s - 0.5],
+                  [0.0, 0.0, 1.0]])
+    return A, (w, h)
+
+
+def birdseye_view(rectified_image: np.ndarray, H, *, x_range=(0.1, 0.6), y_range=(-0.25, 0.25),
+                  px_per_m: float = 800) -> np.ndarray:
+    """Top-down view of the ground seen in a rectified image.
+
+    The output covers ``x_range`` (forward, metres; far at the top) by ``y_range``
+    (left positive; left of the robot is the left of the image) at ``px_per_m``;
+    pixel ``(c, r)`` shows the ground point ``x = x_max - (r + 0.5)/px_per_m``,
+    ``y = y_max - (c + 0.5)/px_per_m``. Ground outside the camera's view is black.
+
+    Returns
+    -------
+    (round((x_max - x_min) px_per_m), round((y_max - y_min) px_per_m) [, C]) image,
+    same dtype as the input.
+    """
+    if not isinstance(rectified_image, np.ndarray) or rectified_image.size == 0:
+        raise DtscalError("expected a non-empty rectified image")
+    H = _homography(H)
+    A, (w, h) = _ground_to_view(x_range, y_range, px_per_m)
+    return cv2.warpPerspective(rectified_image, A @ H, (w, h), flags=cv2.INTER_LINEAR,
+                               borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+def draw_ground_grid(rectified_image: np.ndarray, H, *, spacing: float = 0.05, x_range=(0.1, 0.6),
+                     y_range=(-0.25, 0.25), color=(0, 255, 0), thickness: int = 1,
+                     labels: bool = True) -> np.ndarray:
+    """Draw ground lines of constant x and constant y (every ``spacing`` metres) on a copy of the image.
+
+    Lines are mapped with ``H^-1``; only the parts in front of the camera are drawn.
+    With ``labels`` the constant-x lines are labelled with their distance in cm at
+    ``y = 0``. A grey image is converted to BGR so the grid shows in colour.
+
+    Returns
+    -------
+    H x W x 3 uint8 copy of the image with the grid.
+    """
+    if not isinstance(rectified_image, np.ndarray) or rectified_image.size == 0:
+        raise DtscalError("expected a non-empty rectified image")
+    if not (np.isfinite(spacing) and spacing > 0):
+        raise DtscalError(f"spacing must be a positive distance in metres, got {spacing!r}")
+    H = _homography(H)
+    (x0, x1), (y0, y1) = (tuple(map(float, x_range)), tuple(map(float, y_range)))
+    if not (x1 > x0 and y1 > y0):
+        raise DtscalError(f"x_range and y_range must be (min, max) with min < max, got {x_range}, {y_range}")
+    if (x1 - x0) / spacing > 1000 or (y1 - y0) / spacing > 1000:
+        raise DtscalError("too many grid lines; increase spacing")
+    out = rectified_image.copy()
+    if out.ndim == 2 or out.shape[2] == 1:
+        out = cv2.cvtColor(out.reshape(out.shape[:2]), cv2.COLOR_GRAY2BGR)
+    elif out.shape[2] == 4:
+        out = cv2.cvtColor(out, cv2.COLOR_BGRA2BGR)
+    h, w = out.shape[:2]
+    Hinv = np.linalg.inv(H)
+    # the sign of w for ground points in front of the camera: that of a pixel at the image bottom
+    ref = np.sign(H[2] @ np.array([(w - 1) / 2.0, h - 1.0, 1.0]))
+
+    def polyline(pts_ground: np.ndarray) -> None:
+        hom, scale = _apply(Hinv, pts_ground)
+        # H^-1 g = p / w' with w' = H[2] . p: in front when its sign matches ref's
+        front = np.sign(hom[:, 2]) == ref
+        front &= np.abs(hom[:, 2]) > 1e-9 * scale
+        px = np.full((len(pts_ground), 2), np.nan)
+        px[front] = hom[front, :2] / hom[front, 2:3]
+        limit = 4.0 * max(w, h)  # keep coordinates within int range for cv2
+        for a, b in zip(px[:-1], px[1:]):
+            if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.all(np.abs(np.r_[a, b]) < limit):
+                cv2.line(out, (int(round(a[0] * 16)), int(round(a[1] * 16))),
+                         (int(round(b[0] * 16)), int(round(b[1] * 16))), color, thickness, cv2.LINE_AA, 4)
+
+    n = 60
+    xs = np.arange(np.ceil(x0 / spacing - 1e-9), np.floor(x1 / spacing + 1e-9) + 1) * spacing
+    ys = np.arange(np.ceil(y0 / spacing - 1e-9), np.floor(y1 / spacing + 1e-9) + 1) * spacing
+    for x in xs:
+        polyline(np.column_stack([np.full(n, x), np.linspace(y0, y1, n)]))
+    for y in ys:
+        polyline(np.column_stack([np.linspace(x0, x1, n), np.full(n, y)]))
+    if labels:
+        last_v = np.inf
+        for x in xs:  # near to far: labels climb the image; skip those that would overlap
+            hom = Hinv @ np.array([x, 0.0, 1.0])
+            if np.sign(hom[2]) != ref or abs(hom[2]) < 1e-12:
+                continue
+            u, v = hom[:2] / hom[2]
+            if 0 <= u < w and 0 <= v < h and last_v - v >= 12:
+                last_v = v
+                cv2.putText(out, f"{x * 100:.0f}", (int(u) + 3, int(v) - 3), cv2.FONT_HERSHEY_SIMPLEX,
+                            0.35, color, 1, cv2.LINE_AA)
+    return out

@@ -1,0 +1,130 @@
+"""Camera sources: where the frames of a calibration come from.
+
+One function, :func:`open_source`, turns what the user typed into an iterable of
+:class:`Frame`:
+
+======================  =========  ==========  =============================================
+spec                    kind       is_stream   frames
+======================  =========  ==========  =============================================
+``run.bag``             bag        True        one per message of the camera image topic
+``run.mp4`` (.avi ...)  video      True        one per decoded video frame
+``frames/``             folder     False       one per visible file, natural order
+``frames/*.png``        glob       False       one per matching file, natural order
+``img.png``             glob       False       that one image
+======================  =========  ==========  =============================================
+
+Bad data never stops a source: a frame that cannot be used comes out with ``image=None``
+and an ``error`` (a :class:`~dtscal_lib.errors.FrameError` whose ``reason`` is a short key),
+and the next frame follows. A bag cut short yields every message still readable, then one
+last frame with reason ``"truncated"``. Only a source that cannot be opened at all raises
+:class:`~dtscal_lib.errors.SourceError`, with a message that says what to pass instead.
+
+A live ROS topic source is not here yet.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..errors import SourceError
+from .bag import BagSource, list_image_topics, write_compressed_image_bag
+from .decode import decode_image
+from .files import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, StillsSource, VideoSource, folder_source, glob_source
+from .frame import Frame, FrameSource
+
+_GLOB_CHARS = set("*?[")
+
+
+def open_source(spec: str | os.PathLike, *, topic: str | None = None) -> FrameSource:
+    """Open a recording or a set of images as a :class:`FrameSource`.
+
+    Parameters
+    ----------
+    spec : path of a ROS 1 bag (``.bag``), a video file, a folder of images, a single image,
+        or a glob pattern such as ``"frames/*.png"``
+    topic : bag topic to read; by default the one ending in ``/image/compressed`` (or the only
+        image topic). Only meaningful for bags.
+
+    Returns
+    -------
+    FrameSource
+        Iterable of :class:`Frame`; ``len()`` works for bags, folders and globs.
+
+    Raises
+    ------
+    SourceError
+        Missing path, unknown file type, bag without image topic or without ``topic``,
+        video OpenCV cannot open, folder without images, pattern matching nothing.
+
+    Examples
+    --------
+    >>> src = open_source("recordings/intrinsics.bag")                  # doctest: +SKIP
+    >>> good = [f.image for f in src if f.ok]                          # doctest: +SKIP
+    """
+    if isinstance(spec, (bytes, bytearray)):
+        spec = os.fsdecode(spec)
+    if not isinstance(spec, (str, os.PathLike)):
+        raise SourceError(f"a source is a path or a glob pattern (str), got {type(spec).__name__}")
+    text = os.fspath(spec)
+    if not text.strip():
+        raise SourceError("empty source; pass a .bag file, a video, a folder of images or a glob like 'frames/*.png'")
+    path = Path(os.path.expanduser(text))
+
+    def no_topic(kind: str) -> None:
+        if topic is not None:
+            raise SourceError(f"topic={topic!r} only applies to ROS bags, but {text!r} is a {kind}; drop topic=")
+
+    if not path.exists():
+        if _GLOB_CHARS & set(text):
+            no_topic("glob pattern")
+            return glob_source(text)
+        hint = ""
+        parent = path.parent
+        if parent.is_dir():
+            near = sorted(p.name for p in parent.iterdir() if p.suffix.lower() in {".bag"} | VIDEO_EXTENSIONS)[:5]
+            if near:
+                hint = f"; recordings in {str(parent)!r}: {', '.join(near)}"
+        raise SourceError(f"source {text!r} does not exist (looked in {os.getcwd()}){hint}")
+    if path.is_dir():
+        if (path / "metadata.yaml").exists():
+            raise SourceError(
+                f"{text!r} looks like a ROS 2 bag (it has metadata.yaml); this kit reads ROS 1 bags: convert it "
+                "with `rosbags-convert --dst out.bag` or record with ROS 1"
+            )
+        no_topic("folder")
+        return folder_source(path, text)
+    ext = path.suffix.lower()
+    if ext == ".bag" or _starts_like_bag(path):
+        return BagSource(path, topic=topic, spec=text)
+    if ext in VIDEO_EXTENSIONS:
+        no_topic("video")
+        return VideoSource(path, text)
+    if ext in IMAGE_EXTENSIONS:
+        no_topic("image file")
+        return StillsSource(text, [path], "glob", path)
+    raise SourceError(
+        f"do not know how to read {path.name!r} (extension {ext or 'none'}); pass a ROS 1 bag (.bag), a video "
+        f"({', '.join(sorted(VIDEO_EXTENSIONS))}), a folder of images or a glob pattern like 'frames/*.png'"
+    )
+
+
+def _starts_like_bag(path: Path) -> bool:
+    try:
+        with path.open("rb") as f:
+            return f.read(9) == b"#ROSBAG V"
+    except OSError:
+        return False
+
+
+__all__ = [
+    "Frame",
+    "FrameSource",
+    "BagSource",
+    "VideoSource",
+    "StillsSource",
+    "open_source",
+    "decode_image",
+    "write_compressed_image_bag",
+    "list_image_topics",
+]

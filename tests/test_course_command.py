@@ -1,0 +1,57 @@
+"""`dtscal course` (what `scripts/course.sh` ends with) really serves the course in JupyterLab."""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_course_serves_notebooks(tmp_path):
+    port = _free_port()
+    env = dict(os.environ, JUPYTER_RUNTIME_DIR=str(tmp_path / "rt"), JUPYTER_CONFIG_DIR=str(tmp_path / "cfg"),
+               JUPYTER_DATA_DIR=str(tmp_path / "data"))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dtscal_lib.cli", "course", "--no-browser", "--port", str(port), "--ip", "127.0.0.1"],
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
+    )
+    try:
+        token = None
+        deadline = time.time() + 90
+        lines = []
+        while time.time() < deadline and token is None:
+            line = proc.stdout.readline().decode(errors="replace")
+            if not line and proc.poll() is not None:
+                break
+            lines.append(line)
+            if "token=" in line:
+                token = line.split("token=")[1].split()[0].strip()
+        assert token, "JupyterLab did not start:\n" + "".join(lines[-30:])
+        url = f"http://127.0.0.1:{port}/api/contents/notebooks?token={token}"
+        with urllib.request.urlopen(url, timeout=30) as r:
+            listing = json.load(r)
+        names = {item["name"] for item in listing["content"]}
+        assert "01_pinhole_projection.ipynb" in names
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/lab?token={token}", timeout=30) as r:
+            assert r.status == 200 and b"JupyterLab" in r.read()
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
