@@ -168,38 +168,47 @@ def undistort_normalized(xy_d, dist, *, tol: float = 1e-14, max_iter: int = 50) 
     d = as_dist(dist)
     if not np.any(d):
         return xy_d.copy()
-    xy = xy_d.copy()
-    active = np.ones(len(xy), dtype=bool)
+    k1, k2, p1, p2, k3 = d
+    out = xy_d.copy()
+    # work on compact copies of the points still iterating; converged ones are written back
+    idx = np.arange(len(out))
+    x, y = out[:, 0].copy(), out[:, 1].copy()
+    tx, ty = x.copy(), y.copy()
     for _ in range(max_iter):
-        x, y = xy[active, 0], xy[active, 1]
-        res = distort_normalized(xy[active], d) - xy_d[active]
-        a, b, c, e = _distortion_jacobian(x, y, *d)
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        rx = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - tx
+        ry = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - ty
+        done = np.maximum(np.abs(rx), np.abs(ry)) < tol
+        if done.any():
+            out[idx[done], 0], out[idx[done], 1] = x[done], y[done]
+            keep = ~done
+            idx, x, y, tx, ty, rx, ry = idx[keep], x[keep], y[keep], tx[keep], ty[keep], rx[keep], ry[keep]
+            if len(idx) == 0:
+                break
+        a, b, c, e = _distortion_jacobian(x, y, k1, k2, p1, p2, k3)
         det = a * e - b * c
         det = np.where(np.abs(det) < 1e-300, 1e-300, det)
-        dx = (e * res[:, 0] - b * res[:, 1]) / det
-        dy = (-c * res[:, 0] + a * res[:, 1]) / det
-        xy[active, 0] -= dx
-        xy[active, 1] -= dy
-        err = np.abs(distort_normalized(xy[active], d) - xy_d[active]).max(axis=1)
-        idx = np.flatnonzero(active)
-        active[idx[err < tol]] = False
-        if not active.any():
-            break
-    if active.any():
-        resid = np.abs(distort_normalized(xy[active], d) - xy_d[active]).max(axis=1)
+        x = x - (e * rx - b * ry) / det
+        y = y - (-c * rx + a * ry) / det
+    if len(idx):
+        out[idx, 0], out[idx, 1] = x, y
+        resid = np.abs(distort_normalized(out[idx], d) - xy_d[idx]).max(axis=1)
         if np.any(~np.isfinite(resid)) or resid.max() > 1e-9:
             raise DtscalError(
-                f"undistortion did not converge for {int(np.sum(resid > 1e-9))} point(s) "
+                f"undistortion did not converge for {int(np.sum(~(resid <= 1e-9)))} point(s) "
                 f"(worst residual {np.nanmax(resid):.3g}); the distortion model is not invertible "
                 "there. Check the distortion coefficients or restrict the points to the image."
             )
-    return xy
+    return out
 
 
 # --------------------------------------------------------------------------- 3-D projection
 def as_rotation(r) -> np.ndarray:
     """A rotation given as a Rodrigues vector (3,) or a matrix (3, 3), as a (3, 3) matrix."""
     r = np.asarray(r, dtype=np.float64)
+    if not np.all(np.isfinite(r)):
+        raise DtscalError("the rotation contains NaN or infinite values")
     if r.size == 3:
         return cv2.Rodrigues(r.reshape(3, 1))[0]
     if r.shape == (3, 3):
@@ -230,7 +239,10 @@ def project_points(X, r, t, K, dist=None) -> np.ndarray:
     """
     X = _as_points(X, 3, "world points")
     R = as_rotation(r)
-    t = np.asarray(t, dtype=np.float64).reshape(3)
+    t = np.asarray(t, dtype=np.float64)
+    if t.size != 3 or not np.all(np.isfinite(t)):
+        raise DtscalError(f"the translation must be 3 finite values, got {t.ravel()!r}")
+    t = t.reshape(3)
     Xc = X @ R.T + t
     if np.any(Xc[:, 2] <= 0):
         raise DtscalError(f"{int(np.sum(Xc[:, 2] <= 0))} point(s) are behind the camera (Z <= 0)")

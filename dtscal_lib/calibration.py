@@ -1,0 +1,703 @@
+"""Full intrinsic calibration from views of a planar target (Zhang's method).
+
+Pipeline, for ``V`` views of a planar target (any planar point set, any unit):
+
+1. **Check the input** at the boundary: shapes, NaN, at least 3 views, at least 4
+   non-collinear points per view, planar object points, matching lengths.
+2. **Homographies**: one normalized DLT per view, board plane -> pixels.
+3. **Degeneracy check**: every view gives Zhang's two constraints (the seed's
+   equations (12)-(13)) on ``b = (B11, B12, B22, B13, B23, B33)``,
+   ``B = K^-T K^-1``. If the stacked constraint matrix ``V`` (plus ``B12 = 0`` when the
+   skew is not estimated) does not pin ``b`` down up to scale -- all boards parallel,
+   the same pose over and over -- we stop *before* optimising garbage. A strongly
+   distorted lens hides this in the homographies (parallel boards in different image
+   regions look differently tilted), so after the refinement the recovered board
+   normals must also spread by at least ``MIN_TILT_SPREAD_DEG``, and a focal length
+   whose standard deviation exceeds ``MAX_RELATIVE_FOCAL_STD`` of it is refused too.
+4. **Closed-form start**: ``b`` from the null vector of ``V``, ``K`` from ``B``
+   (Zhang's appendix B, skew included), each view's ``[r1 r2 t]`` from ``K^-1 H``,
+   distortion zero. If the closed form is not physical (B not positive definite,
+   e.g. strong distortion and few views) we start from OpenCV's
+   ``initCameraMatrix2D`` instead.
+5. **Refinement**: Levenberg-Marquardt on the reprojection error over every
+   parameter -- ``fx, fy, cx, cy, (s), distortion`` and 6 pose parameters per view --
+   solved through the Schur complement of the block-diagonal pose part, so one step
+   costs ``O(V)`` instead of ``O(V^3)``. (OpenCV's ``calibrateCamera`` solves the full
+   dense system at every step: ~0.5 s for 40 views of the 7x5 board, and it cannot
+   estimate skew.)
+6. **Uncertainty**, the Hartley-Zisserman way: ``sigma^2 = |e|^2 / (2N - p)`` with
+   ``e`` all residuals, ``N`` all points and ``p`` all estimated parameters;
+   covariance ``sigma^2 (J^T J)^-1``; the reported standard deviations are the square
+   roots of its intrinsic diagonal (the same formula as OpenCV's
+   ``stdDeviationsIntrinsics``).
+
+The Jacobian of the projection comes from ``cv2.projectPoints`` (which ignores skew)
+plus the exact skew terms ``du = s * y_d``; residuals are computed with
+:func:`dtscal_lib.camera.project_points`, which honours skew.
+
+Examples
+--------
+>>> import numpy as np
+>>> from dtscal_lib import camera, duckietown as dt
+>>> from dtscal_lib.boards import DUCKIETOWN_BOARD
+>>> obj = DUCKIETOWN_BOARD.object_points()
+>>> poses = [([0.3, 0.1, 0.0], [-0.1, -0.06, 0.35]), ([-0.2, 0.3, 0.1], [-0.1, -0.05, 0.4]),
+...          ([0.1, -0.35, -0.1], [-0.08, -0.07, 0.3]), ([-0.3, -0.2, 0.2], [-0.1, -0.04, 0.45])]
+>>> img = [camera.project_points(obj, r, t, dt.default_K(), dt.default_dist()) for r, t in poses]
+>>> res = calibrate([obj] * 4, img, dt.IMAGE_SIZE)
+>>> bool(np.allclose(res.K, dt.default_K(), rtol=1e-6)) and res.rms < 1e-6
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .camera import CameraModel, as_K, project_points
+from .errors import CalibrationError, DtscalError
+
+__all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
+
+MODELS = ("plumb_bob", "radial2")
+_DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
+#: a view needs at least this many points (a homography has 8 degrees of freedom)
+MIN_POINTS_PER_VIEW = 4
+#: Zhang's constraints need at least this many views
+MIN_VIEWS = 3
+#: relative singular value below which the stacked Zhang constraints count as rank deficient
+_PARALLEL_VIEWS_TOL = 2e-3
+#: boards whose recovered normals all lie within this angle (degrees) of their mean are "parallel"
+MIN_TILT_SPREAD_DEG = 3.0
+#: a focal length whose standard deviation exceeds this fraction of it is not determined
+MAX_RELATIVE_FOCAL_STD = 0.25
+
+
+# =========================================================================== result
+@dataclass
+class CalibrationResult:
+    """Outcome of :func:`calibrate`.
+
+    Attributes
+    ----------
+    K : (3, 3) float64 intrinsic matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``
+    dist : (5,) float64 ``[k1, k2, p1, p2, k3]``; zeros for terms the model does not estimate
+    rms : float, pixels: ``sqrt(sum over points of |reprojection residual|^2 / N)``,
+        as ``cv2.calibrateCamera`` reports it (a residual is a 2-D vector)
+    per_view_rms : (V,) float64 pixels, the same per view
+    rvecs, tvecs : (V, 3) float64, board -> camera (Rodrigues vector, translation in
+        the object points' unit)
+    std : standard deviation of every estimated intrinsic parameter, keyed
+        ``fx, fy, cx, cy, [skew], k1, k2, [p1, p2, [k3]]``
+    model : ``"plumb_bob"`` or ``"radial2"``
+    skew : whether the skew ``s = K[0, 1]`` was estimated
+    image_size : (width, height)
+    n_views, n_points : number of views and of points over all views
+    """
+
+    K: np.ndarray
+    dist: np.ndarray
+    rms: float
+    per_view_rms: np.ndarray
+    rvecs: np.ndarray
+    tvecs: np.ndarray
+    std: dict[str, float]
+    model: str
+    skew: bool
+    image_size: tuple[int, int]
+    n_views: int
+    n_points: int
+    #: ``sigma`` of the residual per coordinate, ``sqrt(|e|^2 / (2N - p))``, pixels
+    sigma: float = field(default=float("nan"))
+    #: Levenberg-Marquardt iterations used
+    iterations: int = 0
+
+    def camera(self) -> CameraModel:
+        """The calibrated camera, with ``P`` from ``alpha = 0`` as ROS's calibrator sets it."""
+        return CameraModel(self.K, self.dist, self.image_size, self.model)
+
+    def to_dict(self) -> dict:
+        """A JSON-serialisable summary (plain lists, floats, ints, strings)."""
+        return {
+            "model": self.model,
+            "skew_estimated": bool(self.skew),
+            "image_size": [int(self.image_size[0]), int(self.image_size[1])],
+            "K": [[float(v) for v in row] for row in np.asarray(self.K)],
+            "dist": [float(v) for v in np.asarray(self.dist).ravel()],
+            "rms": float(self.rms),
+            "sigma": float(self.sigma),
+            "per_view_rms": [float(v) for v in self.per_view_rms],
+            "std": {k: float(v) for k, v in self.std.items()},
+            "rvecs": [[float(v) for v in r] for r in self.rvecs],
+            "tvecs": [[float(v) for v in t] for t in self.tvecs],
+            "n_views": int(self.n_views),
+            "n_points": int(self.n_points),
+            "iterations": int(self.iterations),
+        }
+
+
+# =========================================================================== input checks
+def _check_views(object_points, image_points, image_size):
+    """Validate and convert the input.
+
+    Returns
+    -------
+    obj : list of (N_i, 2) float64 board-plane points
+    img : list of (N_i, 2) float64 pixels
+    size : (width, height)
+    """
+    try:
+        w, h = (int(s) for s in image_size)
+    except Exception:
+        raise CalibrationError(f"image_size must be (width, height), e.g. (640, 480); got {image_size!r}") from None
+    if w <= 0 or h <= 0:
+        raise CalibrationError(f"image_size must be positive (width, height), got {image_size!r}")
+    if isinstance(object_points, np.ndarray) and object_points.ndim == 2:
+        raise CalibrationError(
+            "object_points must be a sequence of views (one (N, 3) array per view), got a single "
+            f"{object_points.shape} array; pass [points] * n_views if every view sees the same board"
+        )
+    if isinstance(image_points, np.ndarray) and image_points.ndim == 2:
+        raise CalibrationError(
+            "image_points must be a sequence of views (one (N, 2) array per view), got a single "
+            f"{image_points.shape} array"
+        )
+    try:
+        obj_list, img_list = list(object_points), list(image_points)
+    except TypeError:
+        raise CalibrationError("object_points and image_points must be sequences of per-view arrays") from None
+    if len(obj_list) != len(img_list):
+        raise CalibrationError(
+            f"got {len(obj_list)} views of object points but {len(img_list)} views of image points; "
+            "pass one object-point array per image (repeat the board's points for every view)"
+        )
+    n = len(img_list)
+    if n < MIN_VIEWS:
+        raise CalibrationError(
+            f"only {n} view{'s' if n != 1 else ''}; Zhang's method needs at least {MIN_VIEWS} views "
+            "of the board in different orientations. Collect more views (tilt the board)."
+        )
+    obj_out, img_out = [], []
+    for i, (o, p) in enumerate(zip(obj_list, img_list)):
+        o = _view_array(o, (2, 3), f"object points of view {i}")
+        p = _view_array(p, (2,), f"image points of view {i}")
+        if len(o) != len(p):
+            raise CalibrationError(
+                f"view {i} has {len(o)} object points but {len(p)} image points; every detected "
+                "corner needs its board coordinate, in the same order"
+            )
+        if len(p) < MIN_POINTS_PER_VIEW:
+            raise CalibrationError(
+                f"view {i} has only {len(p)} points; a view needs at least {MIN_POINTS_PER_VIEW} "
+                "(a plane-to-image homography has 8 degrees of freedom). Drop this view."
+            )
+        if o.shape[1] == 3:
+            extent = float(np.ptp(o[:, :2], axis=0).max())
+            if np.abs(o[:, 2]).max() > 1e-9 * max(extent, 1e-300):
+                raise CalibrationError(
+                    f"object points of view {i} are not planar with z = 0 (|z| up to "
+                    f"{np.abs(o[:, 2]).max():.3g}); this calibration needs a planar target. Give "
+                    "board coordinates (x, y, 0) or (N, 2) points in the board plane."
+                )
+            o = o[:, :2]
+        if _line_spread(o) < 1e-9:
+            raise CalibrationError(
+                f"the object points of view {i} are collinear (or all the same point); a planar "
+                "target needs points spread in two directions"
+            )
+        thickness = _line_spread(p, absolute=True)
+        if _line_spread(p) < 1e-3 or thickness < 0.25:
+            raise CalibrationError(
+                f"the image points of view {i} lie on a line (rms distance {thickness:.3g} px from "
+                "it): the board was seen edge-on. Drop this view and tilt the board less."
+            )
+        img_out.append(p)
+        obj_out.append(o)
+    return obj_out, img_out, (w, h)
+
+
+def _view_array(a, dims: tuple[int, ...], name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{name} must be a numeric array, got {type(a).__name__}") from None
+    if arr.ndim == 3 and arr.shape[1] == 1:  # OpenCV's (N, 1, d)
+        arr = arr.reshape(arr.shape[0], arr.shape[2])
+    if arr.ndim != 2 or arr.shape[1] not in dims:
+        want = " or ".join(f"(N, {d})" for d in dims)
+        raise CalibrationError(f"{name} must have shape {want} (or (N, 1, {dims[-1]})), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.sum(~np.all(np.isfinite(arr), axis=1)))
+        raise CalibrationError(f"{name} contain NaN or infinite values ({bad} point(s)); remove them first")
+    return arr
+
+
+def _line_spread(p: np.ndarray, absolute: bool = False) -> float:
+    """How far (N, 2) points are from lying on one line.
+
+    Relative: second / first singular value of the centred points (0 for a line).
+    Absolute: rms distance of the points from their best-fit line.
+    """
+    c = p - p.mean(axis=0)
+    s = np.linalg.svd(c, compute_uv=False)
+    if absolute:
+        return float(s[1] / np.sqrt(len(p)))
+    return float(s[1] / s[0]) if s[0] > 0 else 0.0
+
+
+# =========================================================================== homographies, Zhang
+def _similarity_normalizer(p: np.ndarray) -> np.ndarray:
+    """Hartley normalization (3, 3): centroid to 0, mean distance sqrt(2)."""
+    c = p.mean(axis=0)
+    d = np.sqrt(((p - c) ** 2).sum(axis=1)).mean()
+    s = np.sqrt(2.0) / d
+    return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
+
+
+def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """Normalized DLT homography from board-plane points to pixels.
+
+    Parameters
+    ----------
+    plane_points : (N, 2) float64 board coordinates (any unit), N >= 4, not collinear
+    pixels : (N, 2) float64 image points
+
+    Returns
+    -------
+    (3, 3) float64 ``H`` with ``[u, v, 1] ~ H [x, y, 1]``, scaled so ``H[2, 2] = 1``
+    when possible (else unit Frobenius norm).
+    """
+    Ta, Tb = _similarity_normalizer(plane_points), _similarity_normalizer(pixels)
+    a = plane_points @ Ta[:2, :2].T + Ta[:2, 2]
+    b = pixels @ Tb[:2, :2].T + Tb[:2, 2]
+    n = len(a)
+    A = np.zeros((2 * n, 9))
+    A[0::2, 0:2], A[0::2, 2] = a, 1.0
+    A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
+    A[1::2, 3:5], A[1::2, 5] = a, 1.0
+    A[1::2, 6:8], A[1::2, 8] = -b[:, 1:2] * a, -b[:, 1]
+    Hn = np.linalg.svd(A)[2][-1].reshape(3, 3)
+    H = np.linalg.solve(Tb, Hn @ Ta)
+    return H / H[2, 2] if abs(H[2, 2]) > 1e-12 * np.abs(H).max() else H / np.linalg.norm(H)
+
+
+def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:
+    """Zhang's ``v_ij`` with ``h_i^T B h_j = v_ij . b`` for ``b = (B11, B12, B22, B13, B23, B33)``."""
+    hi, hj = H[:, i], H[:, j]
+    return np.array([
+        hi[0] * hj[0],
+        hi[0] * hj[1] + hi[1] * hj[0],
+        hi[1] * hj[1],
+        hi[2] * hj[0] + hi[0] * hj[2],
+        hi[2] * hj[1] + hi[1] * hj[2],
+        hi[2] * hj[2],
+    ])
+
+
+def _image_normalizer(size: tuple[int, int]) -> np.ndarray:
+    """Pixels -> roughly unit coordinates (centre at 0, scale ``(w + h) / 2``) for conditioning."""
+    w, h = size
+    f = (w + h) / 2.0
+    return np.array([[1.0 / f, 0.0, -(w - 1) / 2.0 / f], [0.0, 1.0 / f, -(h - 1) / 2.0 / f], [0.0, 0.0, 1.0]])
+
+
+def _constraint_matrix(homographies, size, skew: bool) -> np.ndarray:
+    """Stacked Zhang constraints (12)-(13) for homographies in image-normalized coordinates.
+
+    Each row is scaled to unit norm so that views weigh alike; without skew the row
+    ``B12 = 0`` is appended.
+    """
+    T = _image_normalizer(size)
+    rows = []
+    for H in homographies:
+        Hn = T @ H
+        Hn = Hn / np.sqrt(np.linalg.norm(Hn[:, 0]) * np.linalg.norm(Hn[:, 1]))
+        for r in (_v_row(Hn, 0, 1), _v_row(Hn, 0, 0) - _v_row(Hn, 1, 1)):
+            rows.append(r / np.linalg.norm(r))
+    if not skew:
+        rows.append(np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0]))
+    return np.array(rows)
+
+
+def _check_not_degenerate(V: np.ndarray, n_views: int, skew: bool) -> None:
+    """Raise if the constraints leave more than a one-dimensional family of ``b``."""
+    s = np.linalg.svd(V, compute_uv=False)
+    ratio = s[4] / s[0]
+    if ratio < _PARALLEL_VIEWS_TOL:
+        need = "at least 3 board orientations" if skew else "at least 2 clearly different board orientations"
+        raise CalibrationError(
+            f"the {n_views} views do not constrain the intrinsics: the boards are (nearly) parallel "
+            f"to each other (Zhang's constraint matrix is rank deficient, relative singular value "
+            f"{ratio:.2g}). Shifting or turning the board in its own plane adds nothing; tilt it "
+            f"left/right and up/down by 20-45 degrees to get {need}."
+        )
+
+
+def _intrinsics_from_b(b: np.ndarray) -> np.ndarray | None:
+    """Zhang's appendix B: ``K`` from ``b`` (up to scale); ``None`` if not physical."""
+    if b[0] < 0:
+        b = -b
+    B11, B12, B22, B13, B23, B33 = b
+    den = B11 * B22 - B12 * B12
+    if B11 <= 0 or den <= 0:
+        return None
+    v0 = (B12 * B13 - B11 * B23) / den
+    lam = B33 - (B13 * B13 + v0 * (B12 * B13 - B11 * B23)) / B11
+    if lam <= 0:
+        return None
+    alpha = np.sqrt(lam / B11)
+    beta = np.sqrt(lam * B11 / den)
+    gamma = -B12 * alpha * alpha * beta / lam
+    u0 = gamma * v0 / beta - B13 * alpha * alpha / lam
+    K = np.array([[alpha, gamma, u0], [0.0, beta, v0], [0.0, 0.0, 1.0]])
+    return K if np.all(np.isfinite(K)) else None
+
+
+def zhang_closed_form(homographies, image_size, *, skew: bool = True) -> np.ndarray | None:
+    """Zhang's closed-form intrinsics from plane-to-image homographies.
+
+    Solves ``V b = 0`` (equations (12)-(13) of every view, stacked), ``b`` the
+    upper triangle of ``B = K^-T K^-1``, in image-normalized coordinates for
+    conditioning, then reads ``K`` off ``B``.
+
+    Parameters
+    ----------
+    homographies : sequence of (3, 3) board-plane -> pixel homographies
+    image_size : (width, height), only used for conditioning
+    skew : estimate the skew (else ``B12 = 0`` is imposed)
+
+    Returns
+    -------
+    (3, 3) float64 K, or ``None`` when the solution is not physical (``B`` not
+    positive definite: noise, strong distortion or nearly degenerate views).
+    """
+    size = (int(image_size[0]), int(image_size[1]))
+    V = _constraint_matrix(homographies, size, skew)
+    b = np.linalg.svd(V)[2][-1]
+    Kn = _intrinsics_from_b(b)
+    if Kn is None:
+        return None
+    K = np.linalg.solve(_image_normalizer(size), Kn)  # K = T^-1 Kn
+    K = K / K[2, 2]
+    if not skew:
+        K[0, 1] = 0.0
+    return K
+
+
+def _pose_from_homography(H: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Board pose ``(rvec, t)`` from ``H ~ K [r1 r2 t]``; rotation made orthonormal by SVD."""
+    M = np.linalg.solve(K, H)
+    lam = 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    if M[2, 2] * lam < 0:  # the board must be in front of the camera
+        lam = -lam
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
+    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    R = U @ Wt
+    if np.linalg.det(R) < 0:
+        R = U @ np.diag([1.0, 1.0, -1.0]) @ Wt
+    return cv2.Rodrigues(R)[0].ravel(), t
+
+
+# =========================================================================== parameters
+def _dist_indices(model: str, fix_k3: bool) -> list[int]:
+    if model == "radial2":
+        return [0, 1]
+    return [0, 1, 2, 3] if fix_k3 else [0, 1, 2, 3, 4]
+
+
+def _param_names(skew: bool, dist_idx: list[int]) -> list[str]:
+    return ["fx", "fy", "cx", "cy"] + (["skew"] if skew else []) + [_DIST_NAMES[i] for i in dist_idx]
+
+
+def _unpack(theta: np.ndarray, skew: bool, dist_idx: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    fx, fy, cx, cy = theta[:4]
+    s = theta[4] if skew else 0.0
+    dist = np.zeros(5)
+    dist[dist_idx] = theta[4 + int(skew):]
+    return np.array([[fx, s, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), dist
+
+
+class _Problem:
+    """Residuals and block Jacobians of the reprojection error.
+
+    Intrinsic vector ``theta = [fx, fy, cx, cy, (s), dist...]``; poses ``(V, 6)``
+    rows ``[rvec, t]``. Residual order: per view, per point, ``(du, dv)``.
+    """
+
+    def __init__(self, obj, img, skew, dist_idx):
+        self.obj3 = [np.column_stack([o, np.zeros(len(o))]) for o in obj]
+        self.img = img
+        self.skew, self.dist_idx = skew, dist_idx
+        # Jacobian columns of cv2.projectPoints: rvec 0-2, tvec 3-5, fx 6, fy 7, cx 8, cy 9, dist 10-14
+        self.dist_cols = [10 + i for i in dist_idx]
+        self.n_intr = 4 + int(skew) + len(dist_idx)
+
+    def residuals(self, theta, poses) -> list[np.ndarray]:
+        """Per view (N_i, 2) ``projected - observed`` pixels (skew honoured)."""
+        K, dist = _unpack(theta, self.skew, self.dist_idx)
+        return [project_points(o, p[:3], p[3:], K, dist) - m for o, p, m in zip(self.obj3, poses, self.img)]
+
+    def linearize(self, theta, poses):
+        """Residual vectors and Jacobian blocks per view.
+
+        Returns lists of ``r`` (2N_i,), ``Ji`` (2N_i, n_intr), ``Je`` (2N_i, 6).
+        """
+        K, dist = _unpack(theta, self.skew, self.dist_idx)
+        s = K[0, 1]
+        K0 = K.copy()
+        K0[0, 1] = 0.0
+        rs, Jis, Jes = [], [], []
+        for o, p, m in zip(self.obj3, poses, self.img):
+            uv0, J = cv2.projectPoints(o, p[:3], p[3:], K0, dist)
+            uv0 = uv0.reshape(-1, 2)
+            yd = (uv0[:, 1] - K[1, 2]) / K[1, 1]  # distorted normalized y
+            u = uv0[:, 0] + s * yd
+            r = np.column_stack([u, uv0[:, 1]]) - m
+            # u = u0 + s * y_d with y_d = (v - cy) / fy: chain rule for everything y_d depends on
+            Jv = J[1::2]
+            Je = J[:, :6].copy()
+            Ji = np.zeros((len(J), self.n_intr))
+            Ji[:, :4] = J[:, 6:10]
+            nd = len(self.dist_idx)
+            if nd:
+                Ji[:, 4 + int(self.skew):] = J[:, self.dist_cols]
+            if s != 0.0:
+                Je[0::2] += (s / K[1, 1]) * Jv[:, :6]
+                if nd:
+                    Ji[0::2, 4 + int(self.skew):] += (s / K[1, 1]) * Jv[:, self.dist_cols]
+                # fx, cx, cy do not change y_d; fy does not either (v - cy = fy * y_d)
+            if self.skew:
+                Ji[0::2, 4] = yd
+            rs.append(r.ravel())
+            Jis.append(Ji)
+            Jes.append(Je)
+        return rs, Jis, Jes
+
+
+def _normal_blocks(rs, Jis, Jes):
+    """``A = sum Ji^T Ji``, ``B_v = Ji^T Je``, ``C_v = Je^T Je``, gradients ``g_i``, ``g_v``."""
+    A = sum(Ji.T @ Ji for Ji in Jis)
+    Bs = np.stack([Ji.T @ Je for Ji, Je in zip(Jis, Jes)])
+    Cs = np.stack([Je.T @ Je for Je in Jes])
+    gi = sum(Ji.T @ r for Ji, r in zip(Jis, rs))
+    gv = np.stack([Je.T @ r for Je, r in zip(Jes, rs)])
+    return A, Bs, Cs, gi, gv
+
+
+def _schur_solve(A, Bs, Cs, gi, gv, lam):
+    """Solve the Marquardt-damped normal equations ``(J^T J + lam diag) d = -J^T r`` via Schur."""
+    Ad = A + lam * np.diag(np.maximum(np.diag(A), 1e-12))
+    cd = np.maximum(np.einsum("vii->vi", Cs), 1e-12)
+    Cd = Cs + lam * np.einsum("vi,ij->vij", cd, np.eye(6))
+    Cinv = np.linalg.inv(Cd)
+    BCi = np.einsum("vij,vjk->vik", Bs, Cinv)  # (V, n, 6)
+    S = Ad - np.einsum("vij,vkj->ik", BCi, Bs)
+    rhs = -gi + np.einsum("vij,vj->i", BCi, gv)
+    di = np.linalg.solve(S, rhs)
+    dv = -np.einsum("vij,vj->vi", Cinv, gv + np.einsum("vji,j->vi", Bs, di))
+    return di, dv
+
+
+def _refine(problem: _Problem, theta, poses, max_iter: int = 200):
+    """Levenberg-Marquardt with Marquardt's diagonal scaling; returns ``theta, poses, iterations``."""
+    rs, Jis, Jes = problem.linearize(theta, poses)
+    cost = sum(float(r @ r) for r in rs)
+    lam = 1e-3
+    it = 0
+    for it in range(1, max_iter + 1):
+        A, Bs, Cs, gi, gv = _normal_blocks(rs, Jis, Jes)
+        improved = False
+        while lam < 1e16:
+            try:
+                di, dv = _schur_solve(A, Bs, Cs, gi, gv, lam)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            t_new, p_new = theta + di, poses + dv
+            if t_new[0] <= 0 or t_new[1] <= 0:
+                lam *= 10.0
+                continue
+            try:
+                rs_new, Jis_new, Jes_new = problem.linearize(t_new, p_new)
+            except cv2.error:
+                lam *= 10.0
+                continue
+            cost_new = sum(float(r @ r) for r in rs_new)
+            if np.isfinite(cost_new) and cost_new <= cost:
+                improved = True
+                break
+            lam *= 10.0
+        if not improved:
+            break
+        small_step = np.all(np.abs(di) <= 1e-12 * (np.abs(theta) + 1e-6)) and np.all(
+            np.abs(dv) <= 1e-12 * (np.abs(poses) + 1e-6)
+        )
+        stalled = cost - cost_new <= 1e-16 * cost
+        theta, poses, rs, Jis, Jes, cost = t_new, p_new, rs_new, Jis_new, Jes_new, cost_new
+        lam = max(lam / 10.0, 1e-12)
+        if small_step or stalled or cost == 0.0:
+            break
+    return theta, poses, it
+
+
+def _intrinsic_covariance(problem: _Problem, theta, poses):
+    """``sigma^2`` and ``sigma^2 (J^T J)^-1`` restricted to the intrinsics (Schur complement)."""
+    rs, Jis, Jes = problem.linearize(theta, poses)
+    A, Bs, Cs, _, _ = _normal_blocks(rs, Jis, Jes)
+    n_res = sum(len(r) for r in rs)
+    n_par = problem.n_intr + 6 * len(rs)
+    dof = n_res - n_par  # > 0: checked on entry to calibrate()
+    sigma2 = sum(float(r @ r) for r in rs) / dof
+    S = A - np.einsum("vij,vjk,vlk->il", Bs, np.linalg.inv(Cs), Bs)
+    return sigma2, sigma2 * np.linalg.inv(S)
+
+
+# =========================================================================== entry point
+def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bob", skew: bool = False,
+              fix_k3: bool = True) -> CalibrationResult:
+    """Calibrate a camera's intrinsics from views of a planar target.
+
+    Parameters
+    ----------
+    object_points : sequence of V arrays, (N_i, 3) with z = 0 or (N_i, 2)
+        Target coordinates in the target's plane, any unit (metres for the Duckietown
+        board's :meth:`~dtscal_lib.boards.Board.object_points`).
+    image_points : sequence of V arrays, (N_i, 2) or OpenCV's (N_i, 1, 2), pixels
+    image_size : (width, height)
+    model : ``"plumb_bob"`` (k1, k2, p1, p2 [, k3]) or ``"radial2"`` (k1, k2: Zhang's model)
+    skew : also estimate the skew ``s = K[0, 1]`` (OpenCV cannot; ROS does not)
+    fix_k3 : keep k3 = 0 as ROS does (``plumb_bob`` only)
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    CalibrationError
+        Degenerate or malformed input: fewer than 3 views, mismatched lengths, NaN,
+        fewer than 4 or collinear points in a view, non-planar object points, all
+        boards parallel, or an optimisation that does not reach a physical camera.
+    """
+    if model not in MODELS:
+        raise CalibrationError(f"model must be one of {MODELS}, got {model!r}")
+    if model == "radial2" and not fix_k3:
+        raise CalibrationError("model 'radial2' estimates k1 and k2 only; use model='plumb_bob' to estimate k3")
+    obj, img, size = _check_views(object_points, image_points, image_size)
+    dist_idx = _dist_indices(model, fix_k3)
+    n_res = 2 * sum(len(p) for p in img)
+    n_par = 4 + int(skew) + len(dist_idx) + 6 * len(img)
+    if n_res <= n_par:
+        raise CalibrationError(
+            f"{n_res // 2} points in {len(img)} views cannot determine {n_par} parameters "
+            f"({n_par - 6 * len(img)} intrinsic + 6 per view); add views or use views with more points"
+        )
+    Hs = [plane_homography(o, p) for o, p in zip(obj, img)]
+    _check_not_degenerate(_constraint_matrix(Hs, size, skew), len(Hs), skew)
+
+    problem = _Problem(obj, img, skew, dist_idx)
+    K0 = zhang_closed_form(Hs, size, skew=skew)
+    if K0 is None or not _plausible(K0, size):
+        K0 = _opencv_initial_K(obj, img, size)
+    theta0 = np.concatenate([[K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2]], [K0[0, 1]] if skew else [],
+                             np.zeros(len(dist_idx))])
+    poses0 = np.array([np.concatenate(_pose_from_homography(H, K0)) for H in Hs])
+    theta, poses, iters = _refine(problem, theta0, poses0)
+
+    K, dist = _unpack(theta, skew, dist_idx)
+    try:
+        as_K(K)
+    except ValueError:
+        raise CalibrationError(
+            f"the optimisation did not reach a physical camera (K = {K.tolist()}); the views are "
+            "probably too few or too similar. Add views with the board tilted and in the image corners."
+        ) from None
+    _check_tilt_spread(poses[:, :3])
+    try:
+        res = problem.residuals(theta, poses)
+        sigma2, cov = _intrinsic_covariance(problem, theta, poses)
+    except (np.linalg.LinAlgError, DtscalError) as exc:
+        raise CalibrationError(
+            f"the calibration did not converge to a usable camera ({exc}); add views with the board "
+            "tilted in different directions and covering the image"
+        ) from None
+    sq = np.array([float((r**2).sum()) for r in res])
+    npts = np.array([len(r) for r in res])
+    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) < 0):
+        raise CalibrationError("the parameter covariance is singular: the views do not determine the camera; add views")
+    names = _param_names(skew, dist_idx)
+    std = {n: float(np.sqrt(v)) for n, v in zip(names, np.diag(cov))}
+    worst = max(std["fx"] / K[0, 0], std["fy"] / K[1, 1])
+    if worst > MAX_RELATIVE_FOCAL_STD:
+        raise CalibrationError(
+            f"the views do not determine the focal length (standard deviation {100 * worst:.0f}% of it, "
+            f"residual sigma {np.sqrt(sigma2):.2g} px); the corners are too noisy for these poses. Add "
+            "views with the board tilted 20-45 degrees in different directions and filling the image."
+        )
+    return CalibrationResult(
+        K=K,
+        dist=dist,
+        rms=float(np.sqrt(sq.sum() / npts.sum())),
+        per_view_rms=np.sqrt(sq / npts),
+        rvecs=poses[:, :3].copy(),
+        tvecs=poses[:, 3:].copy(),
+        std=std,
+        model=model,
+        skew=bool(skew),
+        image_size=size,
+        n_views=len(obj),
+        n_points=int(npts.sum()),
+        sigma=float(np.sqrt(sigma2)),
+        iterations=iters,
+    )
+
+
+def board_normal_spread(rvecs) -> float:
+    """Largest angle (degrees) between a board normal and the mean normal of all views.
+
+    Parameters
+    ----------
+    rvecs : (V, 3) Rodrigues vectors, board -> camera
+
+    Returns
+    -------
+    float, degrees; 0 when every board is parallel to every other.
+    """
+    rv = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
+    normals = np.array([cv2.Rodrigues(r.reshape(3, 1))[0][:, 2] for r in rv])
+    normals *= np.where(normals[:, 2:3] < 0, -1.0, 1.0)  # one side of the board
+    mean = normals.mean(axis=0)
+    mean /= np.linalg.norm(mean)
+    return float(np.degrees(np.arccos(np.clip(normals @ mean, -1.0, 1.0))).max())
+
+
+def _check_tilt_spread(rvecs) -> None:
+    spread = board_normal_spread(rvecs)
+    if spread < MIN_TILT_SPREAD_DEG:
+        raise CalibrationError(
+            f"the {len(rvecs)} boards are (nearly) parallel: every board normal is within {spread:.1f} degrees "
+            f"of their mean direction (at least {MIN_TILT_SPREAD_DEG:g} needed), and parallel views do not "
+            "determine the focal length and principal point. Tilt the board left/right and up/down by "
+            "20-45 degrees."
+        )
+
+
+def _plausible(K: np.ndarray, size: tuple[int, int]) -> bool:
+    w, h = size
+    fx, fy = K[0, 0], K[1, 1]
+    return bool(
+        0 < fx < 100 * (w + h) and 0 < fy < 100 * (w + h) and 0.2 < fx / fy < 5
+        and -w < K[0, 2] < 2 * w and -h < K[1, 2] < 2 * h and abs(K[0, 1]) < 0.5 * fx
+    )
+
+
+def _opencv_initial_K(obj, img, size) -> np.ndarray:
+    """OpenCV's own starting point (principal point at the centre, focal lengths from vanishing points)."""
+    o32 = [np.column_stack([o, np.zeros(len(o))]).astype(np.float32) for o in obj]
+    i32 = [p.astype(np.float32).reshape(-1, 1, 2) for p in img]
+    K = np.asarray(cv2.initCameraMatrix2D(o32, i32, size), dtype=np.float64)
+    if not (np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0):
+        raise CalibrationError("could not find a starting camera matrix from these views; add views with tilted boards")
+    return K
