@@ -285,15 +285,11 @@ def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray
 
 def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:
     """Zhang's ``v_ij`` with ``h_i^T B h_j = v_ij . b`` for ``b = (B11, B12, B22, B13, B23, B33)``."""
-    hi, hj = H[:, i], H[:, j]
-    return np.array([
-        hi[0] * hj[0],
-        hi[0] * hj[1] + hi[1] * hj[0],
-        hi[1] * hj[1],
-        hi[2] * hj[0] + hi[0] * hj[2],
-        hi[2] * hj[1] + hi[1] * hj[2],
-        hi[2] * hj[2],
-    ])
+    # h_i^T B h_j = sum_kl B_kl (h_i h_j^T)_kl; off-diagonal entries of the symmetric B
+    # collect both (k, l) and (l, k)
+    outer = np.outer(H[:, i], H[:, j])
+    sym = outer + outer.T
+    return np.array([outer[0, 0], sym[0, 1], outer[1, 1], sym[0, 2], sym[1, 2], outer[2, 2]])
 
 
 def _image_normalizer(size: tuple[int, int]) -> np.ndarray:
@@ -416,7 +412,10 @@ def _unpack(theta: np.ndarray, skew: bool, dist_idx: list[int]) -> tuple[np.ndar
     s = theta[4] if skew else 0.0
     dist = np.zeros(5)
     dist[dist_idx] = theta[4 + int(skew):]
-    return np.array([[fx, s, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), dist
+    K = np.eye(3)
+    K[0] = (fx, s, cx)
+    K[1, 1:] = (fy, cy)
+    return K, dist
 
 
 class _Problem:

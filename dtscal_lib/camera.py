@@ -311,14 +311,14 @@ def rectification_maps(K, dist, new_K, size, R=None, *, dtype=np.float32):
     K = as_K(K)
     new_K = as_K(np.asarray(new_K, dtype=np.float64)[:3, :3])
     w, h = _as_size(size)
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
+    rows, cols = np.indices((h, w), dtype=np.float64)
+    pix = np.stack([cols.ravel(), rows.ravel(), np.ones(rows.size)], axis=1)
     M = new_K if R is None else new_K @ as_rotation(R)
     rays = pix @ np.linalg.inv(M).T
     with np.errstate(divide="ignore", invalid="ignore"):
         xy = rays[:, :2] / rays[:, 2:3]
     ok = np.all(np.isfinite(xy), axis=1) & (rays[:, 2] > 0)
-    out = np.full((u.size, 2), -1.0)
+    out = np.full((rows.size, 2), -1.0)
     out[ok] = normalized_to_pixel(distort_normalized(xy[ok], dist), K)
     return out[:, 0].reshape(h, w).astype(dtype), out[:, 1].reshape(h, w).astype(dtype)
 

@@ -1,0 +1,569 @@
+"""Solutions -> student notebooks, and the student release of the course.
+
+The exercise notebooks in ``solutions/`` are the one source of the course. Each exercise
+function is written there once, inside a region::
+
+    def project_points(K, R, t, X):
+        \"\"\"docstring the student keeps\"\"\"
+        ### BEGIN SOLUTION
+        ...the reference code...
+        ### END SOLUTION
+
+:func:`student_notebook` replaces every region with a stub that raises
+``NotImplementedError`` (at the marker's indentation), clears outputs and drops volatile
+metadata, deterministically: the same solution notebook always gives byte-identical
+student notebooks, so ``notebooks/`` can be checked against ``solutions/``
+(:func:`check_notebooks`) in CI.
+
+Cell conventions the tools rely on (``cell.metadata.tags``):
+
+* ``imports``  - the first code cell: imports and small setup only;
+* ``exercise`` - one exercise function per cell, holding exactly one solution region;
+  it may use only ``np``, ``cv2``, ``math`` and other exercise functions of the
+  notebook, so :func:`solution_functions` can run the imports cell plus the exercise
+  cells without the rest of the notebook;
+* ``solution_only`` - (optional) a cell dropped from the student version entirely.
+"""
+
+from __future__ import annotations
+
+import ast
+import contextlib
+import copy
+import io
+import re
+import shutil
+from pathlib import Path
+from typing import Callable, Iterable
+
+import nbformat
+from nbformat import NotebookNode
+
+from .errors import DtscalError
+
+BEGIN = "### BEGIN SOLUTION"
+END = "### END SOLUTION"
+#: first line of the stub that replaces a region (inject_solutions looks for it)
+STUB_COMMENT = "# YOUR CODE HERE: replace the next line with your code"
+EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG = "exercise", "imports", "solution_only"
+#: cell metadata the student version keeps; everything else (execution timings, scroll
+#: state, collapsed flags...) is dropped
+KEEP_CELL_METADATA = ("tags", "editable", "deletable")
+#: folder names never shipped to students (grading material, caches)
+EXCLUDED_DIRS = frozenset({"grading", "hidden", "__pycache__", ".ipynb_checkpoints", ".pytest_cache"})
+EXCLUDED_SUFFIXES = (".pyc", ".pyo")
+RELEASE_MARKER = ".dtscal-release"
+#: what a student release holds besides the notebooks
+RELEASE_TREES = ("dtscal_lib", "data")
+RELEASE_FILES = ("pyproject.toml", "README.md", "LICENSE")
+
+_DEF_RE = re.compile(r"^\s*def\s+([A-Za-z_]\w*)\s*\(")
+
+
+# --------------------------------------------------------------------------- regions
+def _lines(source: str) -> list[str]:
+    return source.split("\n")
+
+
+def _is_marker(line: str, marker: str) -> bool:
+    return line.strip() == marker
+
+
+def _where(nb_name: str, index: int) -> str:
+    return f"{nb_name}, cell {index}"
+
+
+def find_regions(source: str, where: str = "cell") -> list[tuple[int, int, str]]:
+    """Solution regions of one cell's source.
+
+    Parameters
+    ----------
+    source : str
+        The cell's code.
+    where : str
+        Names the notebook and cell in error messages.
+
+    Returns
+    -------
+    list of (begin_line, end_line, function_name)
+        0-based line numbers of the two markers and the name of the nearest ``def``
+        above the region (``""`` when there is none).
+
+    Raises
+    ------
+    DtscalError
+        On a ``BEGIN`` without ``END``, an ``END`` without ``BEGIN``, or nested regions.
+    """
+    regions, begin, func = [], None, ""
+    for i, line in enumerate(_lines(source)):
+        m = _DEF_RE.match(line)
+        if m and begin is None:
+            func = m.group(1)
+        if _is_marker(line, BEGIN):
+            if begin is not None:
+                raise DtscalError(
+                    f"{where}: '{BEGIN}' on line {i + 1} before the region opened on line {begin + 1} "
+                    f"was closed; add '{END}' after the solution code"
+                )
+            begin = i
+        elif _is_marker(line, END):
+            if begin is None:
+                raise DtscalError(
+                    f"{where}: '{END}' on line {i + 1} has no matching '{BEGIN}' above it; "
+                    "add the BEGIN marker or delete the stray END"
+                )
+            regions.append((begin, i, func))
+            begin = None
+        elif BEGIN.lstrip("# ") in line or END.lstrip("# ") in line:
+            raise DtscalError(
+                f"{where}: line {i + 1} mentions a solution marker but is not exactly "
+                f"'{BEGIN}' or '{END}' on a line of its own: {line.strip()!r}"
+            )
+    if begin is not None:
+        raise DtscalError(
+            f"{where}: '{BEGIN}' on line {begin + 1} is never closed; add '{END}' after the solution code"
+        )
+    return regions
+
+
+def _stub(indent: str, func: str) -> list[str]:
+    what = f"{func} is not written yet" if func else "this exercise is not written yet"
+    return [f"{indent}{STUB_COMMENT}", f'{indent}raise NotImplementedError("{what}")']
+
+
+def _indent_of(line: str) -> str:
+    return line[: len(line) - len(line.lstrip())]
+
+
+def strip_regions(source: str, where: str = "cell") -> str:
+    """Replace every solution region of ``source`` with the ``NotImplementedError`` stub."""
+    lines = _lines(source)
+    out, pos = [], 0
+    for b, e, func in find_regions(source, where):
+        out.extend(lines[pos:b])
+        out.extend(_stub(_indent_of(lines[b]), func))
+        pos = e + 1
+    out.extend(lines[pos:])
+    return "\n".join(out)
+
+
+def region_code(source: str, where: str = "cell") -> dict[str, list[str]]:
+    """The code lines inside each region, keyed by function name (markers excluded)."""
+    lines = _lines(source)
+    return {func: lines[b + 1 : e] for b, e, func in find_regions(source, where)}
+
+
+# --------------------------------------------------------------------------- notebooks
+def _nb_name(nb: NotebookNode, default: str = "notebook") -> str:
+    return str(nb.get("metadata", {}).get("dtscal_path", default))
+
+
+def _tags(cell) -> list[str]:
+    return list(cell.get("metadata", {}).get("tags", []))
+
+
+def _validate_cells(nb: NotebookNode, name: str) -> None:
+    for i, cell in enumerate(nb.cells):
+        src = cell.source
+        if cell.cell_type != "code":
+            if any(_is_marker(l, BEGIN) or _is_marker(l, END) for l in _lines(src)):
+                raise DtscalError(
+                    f"{_where(name, i)}: solution markers in a {cell.cell_type} cell; "
+                    "regions belong in code cells tagged 'exercise'"
+                )
+            continue
+        regions = find_regions(src, _where(name, i))
+        if EXERCISE_TAG in _tags(cell) and len(regions) != 1:
+            raise DtscalError(
+                f"{_where(name, i)}: an 'exercise' cell must hold exactly one solution region "
+                f"('{BEGIN}' ... '{END}'), found {len(regions)}"
+            )
+        if regions and EXERCISE_TAG not in _tags(cell):
+            raise DtscalError(
+                f"{_where(name, i)}: a solution region outside an 'exercise' cell; tag the cell "
+                "'exercise' (cell.metadata.tags) so the tools can find it"
+            )
+
+
+def student_notebook(solution_nb: NotebookNode, name: str | None = None) -> NotebookNode:
+    """The student version of a solution notebook.
+
+    Regions become ``raise NotImplementedError`` stubs, cells tagged ``solution_only``
+    are dropped, outputs are cleared, execution counts set to ``None``, cell metadata
+    reduced to :data:`KEEP_CELL_METADATA` and notebook metadata to the kernel spec and
+    language name. The input is not modified; the result depends only on the input.
+
+    Parameters
+    ----------
+    solution_nb : NotebookNode
+        An nbformat 4 notebook.
+    name : str, optional
+        Names the notebook in error messages.
+
+    Raises
+    ------
+    DtscalError
+        On unbalanced or misplaced solution markers (naming the notebook and cell).
+    """
+    name = name or _nb_name(solution_nb)
+    nb = copy.deepcopy(solution_nb)
+    if nb.get("nbformat") != 4:
+        raise DtscalError(f"{name}: expected an nbformat 4 notebook, got version {nb.get('nbformat')}")
+    _validate_cells(nb, name)
+    cells = []
+    for i, cell in enumerate(nb.cells):
+        if SOLUTION_ONLY_TAG in _tags(cell):
+            continue
+        md = {k: cell.metadata[k] for k in KEEP_CELL_METADATA if k in cell.get("metadata", {})}
+        cell["metadata"] = nbformat.from_dict(md)
+        if cell.cell_type == "code":
+            cell.source = strip_regions(cell.source, _where(name, i))
+            cell.outputs = []
+            cell.execution_count = None
+        elif "attachments" in cell and not cell.attachments:
+            del cell["attachments"]
+        cells.append(cell)
+    nb.cells = cells
+    meta = {}
+    if "kernelspec" in solution_nb.metadata:
+        meta["kernelspec"] = dict(solution_nb.metadata.kernelspec)
+    lang = solution_nb.metadata.get("language_info", {}).get("name")
+    if lang:
+        meta["language_info"] = {"name": lang}
+    nb.metadata = nbformat.from_dict(meta)
+    return nb
+
+
+def _read(path: Path) -> NotebookNode:
+    try:
+        return nbformat.read(str(path), as_version=4)
+    except Exception as exc:
+        raise DtscalError(f"cannot read notebook {path}: {exc}; is it valid nbformat 4 JSON?") from None
+
+
+def _writes(nb: NotebookNode) -> str:
+    return nbformat.writes(nb, version=4) + "\n"  # nbformat.write adds the final newline too
+
+
+def _solution_paths(solutions_dir: Path) -> list[Path]:
+    solutions_dir = Path(solutions_dir)
+    if not solutions_dir.is_dir():
+        raise DtscalError(f"no solutions folder at {solutions_dir}; run from the kit checkout or pass --repo")
+    return sorted(p for p in solutions_dir.glob("*.ipynb") if not p.name.startswith("."))
+
+
+def _render(sol_path: Path) -> str:
+    return _writes(student_notebook(_read(sol_path), name=sol_path.name))
+
+
+def generate_notebooks(solutions_dir, notebooks_dir) -> list[Path]:
+    """Write the student notebook of every ``solutions_dir/*.ipynb`` into ``notebooks_dir``.
+
+    Files are only rewritten when their content changes. Notebooks in ``notebooks_dir``
+    without a source are left alone (:func:`check_notebooks` reports them).
+
+    Returns
+    -------
+    list of Path
+        The student notebooks, one per solution notebook, sorted by name.
+    """
+    notebooks_dir = Path(notebooks_dir)
+    rendered = [(p, _render(p)) for p in _solution_paths(Path(solutions_dir))]  # fail before writing
+    notebooks_dir.mkdir(parents=True, exist_ok=True)
+    out = []
+    for sol, text in rendered:
+        target = notebooks_dir / sol.name
+        if not target.exists() or target.read_text(encoding="utf-8") != text:
+            target.write_text(text, encoding="utf-8")
+        out.append(target)
+    return out
+
+
+def check_notebooks(solutions_dir, notebooks_dir) -> list[str]:
+    """Differences between ``notebooks_dir`` and what :func:`generate_notebooks` would write.
+
+    Returns
+    -------
+    list of str
+        One human-readable line per problem; ``[]`` when in sync.
+    """
+    solutions_dir, notebooks_dir = Path(solutions_dir), Path(notebooks_dir)
+    diffs = []
+    sources = _solution_paths(solutions_dir)
+    names = {p.name for p in sources}
+    for sol in sources:
+        target = notebooks_dir / sol.name
+        if not target.exists():
+            diffs.append(f"{target} is missing (source {sol})")
+            continue
+        want = _render(sol)
+        have = target.read_text(encoding="utf-8")
+        if have != want:
+            diffs.append(f"{target} differs from the student version of {sol}: {_first_difference(have, want)}")
+    if notebooks_dir.is_dir():
+        for extra in sorted(notebooks_dir.glob("*.ipynb")):
+            if extra.name not in names:
+                diffs.append(f"{extra} has no source in {solutions_dir}; add {solutions_dir / extra.name} or delete it")
+    return diffs
+
+
+def _first_difference(have: str, want: str) -> str:
+    try:
+        a, b = nbformat.reads(have, as_version=4), nbformat.reads(want, as_version=4)
+    except Exception:
+        return "the file is not a valid notebook"
+    if len(a.cells) != len(b.cells):
+        return f"{len(a.cells)} cells instead of {len(b.cells)}"
+    for i, (ca, cb) in enumerate(zip(a.cells, b.cells)):
+        if ca != cb:
+            fields = sorted(k for k in set(ca) | set(cb) if ca.get(k) != cb.get(k))
+            return f"cell {i} differs in {', '.join(fields)}"
+    if a.metadata != b.metadata:
+        return "notebook metadata differs"
+    return "formatting differs (edited by hand?)"
+
+
+# --------------------------------------------------------------------------- release
+def _skip(rel: Path) -> bool:
+    return any(part in EXCLUDED_DIRS for part in rel.parts) or rel.name.endswith(EXCLUDED_SUFFIXES)
+
+
+def _copy_tree(src: Path, dst: Path) -> None:
+    for path in sorted(src.rglob("*")):
+        rel = path.relative_to(src)
+        if _skip(rel) or path.is_dir():
+            continue
+        (dst / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(path, dst / rel)
+
+
+def _check_out_dir(out: Path, root: Path) -> None:
+    if out == root or root.is_relative_to(out):
+        raise DtscalError(f"the release folder {out} contains the kit checkout {root}; choose a new folder")
+    for name in ("solutions", "notebooks", *RELEASE_TREES, "tests"):
+        if out.is_relative_to(root / name):
+            raise DtscalError(f"the release folder {out} is inside the kit's {name}/; choose a folder outside it")
+    if out.exists():
+        if not out.is_dir():
+            raise DtscalError(f"{out} exists and is not a folder; choose a new folder for the release")
+        if any(out.iterdir()) and not (out / RELEASE_MARKER).exists():
+            raise DtscalError(
+                f"{out} is not empty and was not written by `dtscal release`; choose a new or empty folder"
+            )
+
+
+def release(out_dir, repo_root=None) -> Path:
+    """Write the student version of the course into ``out_dir``.
+
+    It holds ``notebooks/`` (generated from ``solutions/``, never copied), ``dtscal_lib/``
+    and ``data/`` without grading-only folders (:data:`EXCLUDED_DIRS`) and caches, and
+    ``pyproject.toml``, ``README.md`` (and ``LICENSE`` when present). It holds no
+    ``solutions/`` and no ``tests/``. A folder written by an earlier release is replaced.
+    After writing, the release is scanned for solution code (:func:`find_solution_leaks`).
+
+    Returns
+    -------
+    Path
+        ``out_dir``, resolved.
+
+    Raises
+    ------
+    DtscalError
+        If ``out_dir`` is unsafe (inside the checkout's sources, or a non-empty folder not
+        written by a release) or a solution line leaked into the release.
+    """
+    from .paths import repo_root as default_root
+
+    root = Path(repo_root if repo_root is not None else default_root()).resolve()
+    out = Path(out_dir).resolve()
+    _check_out_dir(out, root)
+    sources = _solution_paths(root / "solutions")
+    rendered = [(p.name, _render(p)) for p in sources]  # fail on bad markers before touching out
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    (out / "notebooks").mkdir()
+    for name, text in rendered:
+        (out / "notebooks" / name).write_text(text, encoding="utf-8")
+    for tree in RELEASE_TREES:
+        if (root / tree).is_dir():
+            _copy_tree(root / tree, out / tree)
+    for f in RELEASE_FILES:
+        if (root / f).is_file():
+            shutil.copy2(root / f, out / f)
+    (out / RELEASE_MARKER).write_text("written by `dtscal release`; safe to delete and regenerate\n")
+    leaks = find_solution_leaks(out, sources)
+    if leaks:
+        raise DtscalError(
+            "solution code leaked into the release (move it out of the library, or tag the cell "
+            "'solution_only'):\n  " + "\n  ".join(leaks[:20])
+        )
+    return out
+
+
+#: lines that only convert/validate inputs (``x = np.asarray(x, dtype=float).reshape(-1, 2)``):
+#: every function starts with them, so finding one elsewhere proves nothing
+_BOILERPLATE = re.compile(
+    r"^[\w, ]+ = (np\.)?(asarray|array|atleast_2d|float|int)\((?:[^()]|\([^()]*\))*\)(\.(reshape|ravel|copy|astype)\([^()]*\))*$"
+)
+
+
+def _distinctive(line: str) -> str | None:
+    """A solution line worth searching for: not blank, not a comment, not tiny or boilerplate."""
+    s = line.strip()
+    if not s or s.startswith("#") or len(re.sub(r"\s", "", s)) < 20 or _BOILERPLATE.match(s):
+        return None
+    return s
+
+
+def solution_lines(nb_paths: Iterable[Path]) -> list[tuple[str, str, str]]:
+    """Distinctive code lines of every solution region: ``(notebook, function, line)``."""
+    out = []
+    for p in nb_paths:
+        nb = _read(Path(p))
+        for i, cell in enumerate(nb.cells):
+            if cell.cell_type != "code":
+                continue
+            for func, lines in region_code(cell.source, _where(Path(p).name, i)).items():
+                for line in lines:
+                    s = _distinctive(line)
+                    if s:
+                        out.append((Path(p).name, func, s))
+    return out
+
+
+def find_solution_leaks(out_dir, solution_nbs: Iterable[Path]) -> list[str]:
+    """Lines of solution regions found in any text file under ``out_dir``.
+
+    Lines shorter than 20 non-blank characters and comments are not searched (they are
+    too generic to prove a leak).
+
+    Returns
+    -------
+    list of str
+        ``"<file>: <notebook>:<function>: <line>"`` per hit; ``[]`` when clean.
+    """
+    lines = solution_lines(solution_nbs)
+    hits = []
+    for path in sorted(Path(out_dir).rglob("*")):
+        if not path.is_file():
+            continue
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (UnicodeDecodeError, OSError):
+            continue
+        text_lines = {l.strip() for l in text.split("\n")}
+        if path.suffix == ".ipynb":  # sources are JSON strings: decode them
+            try:
+                nb = nbformat.reads(text, as_version=4)
+                text_lines = {l.strip() for c in nb.cells for l in c.source.split("\n")}
+            except Exception:
+                pass
+        for nb_name, func, s in lines:
+            if s in text_lines:
+                hits.append(f"{path}: {nb_name}:{func}: {s}")
+    return hits
+
+
+# --------------------------------------------------------------------------- using solutions
+def _exec_source(source: str) -> str:
+    """Cell source as plain Python: IPython magics and shell lines commented out."""
+    return "\n".join(("# " + l) if l.lstrip().startswith(("%", "!")) else l for l in _lines(source))
+
+
+def _defined_functions(source: str) -> list[str]:
+    return [n.name for n in ast.parse(source).body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+
+
+def solution_functions(nb_path, names: Iterable[str] | None = None) -> dict[str, Callable]:
+    """The exercise functions of a solutions notebook, ready to call.
+
+    Runs the cell tagged ``imports`` and every cell tagged ``exercise`` (in order) in a
+    fresh namespace; the rest of the notebook is not run.
+
+    Parameters
+    ----------
+    nb_path : path of a notebook in ``solutions/``
+    names : optional, the functions wanted (default: every function the exercise cells define)
+
+    Returns
+    -------
+    dict name -> function
+
+    Raises
+    ------
+    DtscalError
+        If the notebook has no ``imports``/``exercise`` cells, a cell fails to run, or a
+        requested name is not defined by an exercise cell.
+    """
+    nb_path = Path(nb_path)
+    nb = _read(nb_path)
+    _validate_cells(nb, nb_path.name)
+    imports = [c for c in nb.cells if c.cell_type == "code" and IMPORTS_TAG in _tags(c)]
+    exercises = [c for c in nb.cells if c.cell_type == "code" and EXERCISE_TAG in _tags(c)]
+    if not imports or not exercises:
+        raise DtscalError(
+            f"{nb_path.name}: needs a code cell tagged 'imports' and cells tagged 'exercise' "
+            f"(found {len(imports)} and {len(exercises)})"
+        )
+    module_name = "dtscal_solution_" + re.sub(r"\W", "_", nb_path.stem)
+    ns: dict = {"__name__": module_name}
+    defined = []
+    for cell in imports + exercises:
+        idx = nb.cells.index(cell)
+        src = _exec_source(cell.source)
+        try:
+            code = compile(src, f"<{nb_path.name} cell {idx}>", "exec")
+            if cell in exercises:
+                defined += _defined_functions(src)
+            with contextlib.redirect_stdout(io.StringIO()):  # setup prints are for the notebook reader
+                exec(code, ns)
+        except Exception as exc:
+            raise DtscalError(f"{_where(nb_path.name, idx)} failed to run: {type(exc).__name__}: {exc}") from exc
+    wanted = list(names) if names is not None else defined
+    missing = [n for n in wanted if n not in defined]
+    if missing:
+        raise DtscalError(
+            f"{nb_path.name} defines no exercise function named {', '.join(missing)}; "
+            f"its exercise cells define {', '.join(defined) or 'nothing'}"
+        )
+    return {n: ns[n] for n in wanted}
+
+
+def inject_solutions(student_nb: NotebookNode, solution_nb: NotebookNode) -> NotebookNode:
+    """Paste the solution regions into a student notebook's stubs (as a student who solved it).
+
+    Stubs are matched to regions by the name of the enclosing function. Returns a new
+    notebook; the inputs are not modified.
+
+    Raises
+    ------
+    DtscalError
+        If a stub has no matching solution region.
+    """
+    solutions: dict[str, list[str]] = {}
+    sol_name = _nb_name(solution_nb, "solution notebook")
+    for i, cell in enumerate(solution_nb.cells):
+        if cell.cell_type == "code":
+            solutions.update(region_code(cell.source, _where(sol_name, i)))
+    nb = copy.deepcopy(student_nb)
+    for i, cell in enumerate(nb.cells):
+        if cell.cell_type != "code":
+            continue
+        lines, out, func, j = _lines(cell.source), [], "", 0
+        while j < len(lines):
+            m = _DEF_RE.match(lines[j])
+            if m:
+                func = m.group(1)
+            if lines[j].strip() == STUB_COMMENT and j + 1 < len(lines) and "NotImplementedError" in lines[j + 1]:
+                if func not in solutions:
+                    raise DtscalError(
+                        f"student notebook cell {i}: no solution region for function {func or '(none)'}"
+                    )
+                out.extend(solutions[func])
+                j += 2
+                continue
+            out.append(lines[j])
+            j += 1
+        cell.source = "\n".join(out)
+    return nb

@@ -1,0 +1,165 @@
+"""Self-checks for notebook 01, pinhole projection (eqs. (1)-(2)).
+
+``check_project_points(fn)`` tests a student's ``project_points(K, R, t, X) -> (N, 2)``
+against OpenCV's ``cv2.projectPoints`` and against pixels known by construction (a pixel
+is chosen first and a 3-D point placed on its ray), never against a second copy of the
+solution.
+
+:func:`use_or_fallback` lets later cells run before the student's function works.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+
+from ..boards import DUCKIETOWN_BOARD
+from ..camera import intrinsic_matrix, pixel_to_normalized
+from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
+
+__all__ = ["check_project_points", "use_or_fallback", "random_pose", "K_DUCKIE", "K_SKEWED"]
+
+#: a Duckiebot-like camera (fx, fy, cx, cy near the shipped default.yaml)
+K_DUCKIE = intrinsic_matrix(307.7, 315.0, 329.7, 244.5)
+#: the same with a visible skew: catches code that ignores K[0, 1]
+K_SKEWED = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=6.0)
+
+
+def use_or_fallback(fn: Callable, fallback: Callable, *args, what: str = "", **kwargs) -> Any:
+    """Call the student's ``fn(*args)``; if it is not written yet or fails, use ``fallback``.
+
+    A clear message is printed whenever the fallback is used, so a figure drawn from the
+    library's result is never mistaken for the student's.
+
+    Parameters
+    ----------
+    fn : the student's function
+    fallback : a library/OpenCV function with the same arguments and result
+    what : names the fallback in the message, e.g. ``"OpenCV's cv2.findHomography"``
+    """
+    name = getattr(fn, "__name__", "your function")
+    label = what or getattr(fallback, "__name__", "the library's result")
+    try:
+        return fn(*args, **kwargs)
+    except NotImplementedError:
+        print(f">>> {name} is not written yet: using {label} until your function works.")
+    except Exception as exc:  # a student's bug must not stop the notebook
+        print(f">>> {name} raised {type(exc).__name__}: {exc}\n>>> using {label} until your function works.")
+    return fallback(*args, **kwargs)
+
+
+# --------------------------------------------------------------------------- ground truth
+def random_pose(rng: np.random.Generator, distance=(0.3, 0.8), max_angle_deg: float = 35.0):
+    """A board pose in front of the camera: rotation (3, 3) and translation (3,) metres.
+
+    The Duckietown board's centre lands near the optical axis at ``distance`` metres, tilted
+    by up to ``max_angle_deg`` about a random axis.
+    """
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    angle = np.deg2rad(rng.uniform(5.0, max_angle_deg))
+    R = cv2.Rodrigues((axis * angle).reshape(3, 1))[0]
+    centre = DUCKIETOWN_BOARD.object_points().mean(axis=0)
+    z = rng.uniform(*distance)
+    target = np.array([rng.uniform(-0.1, 0.1) * z, rng.uniform(-0.08, 0.08) * z, z])
+    t = target - R @ centre
+    return R, t
+
+
+def points_on_rays(K: np.ndarray, R: np.ndarray, t: np.ndarray, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """World points (N, 3) that a camera (K, R, t) must see at pixels ``uv`` (N, 2).
+
+    Each pixel is back-projected with ``K^-1`` (skew included) to a ray, the point is put at
+    ``depth`` along the optical axis, and moved to the world frame with ``R^T (Xc - t)``.
+    """
+    xy = pixel_to_normalized(uv, K)
+    Xc = np.column_stack([xy, np.ones(len(xy))]) * np.asarray(depth, dtype=float).reshape(-1, 1)
+    return (Xc - t.reshape(1, 3)) @ R  # rows: R^T (Xc - t)
+
+
+# --------------------------------------------------------------------------- the check
+def _call(fn, K, R, t, X, n):
+    args = [np.array(a, dtype=np.float64, copy=True) for a in (K, R, t, X)]
+    out = expect_shape(fn(*args), (n, 2), "project_points(K, R, t, X)")
+    for a, b, name in zip(args, (K, R, t, X), ("K", "R", "t", "X")):
+        if not np.array_equal(a, np.asarray(b, dtype=np.float64)):
+            raise CheckFailed(f"project_points changed its input {name}; work on copies")
+    return out
+
+
+def _case_axis(fn):
+    R, t = np.eye(3), np.zeros(3)
+    X = np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 2.0]])
+    expect_close(_call(fn, K_DUCKIE, R, t, X, 2), np.tile(K_DUCKIE[:2, 2], (2, 1)), 1e-9,
+                 "pixels of points on the optical axis")
+
+
+def _case_depth(fn):
+    R, t = np.eye(3), np.zeros(3)
+    X = np.array([[0.1, 0.05, 1.0], [0.2, 0.1, 2.0], [-0.3, 0.2, 0.5]])
+    fx, fy, cx, cy = K_DUCKIE[0, 0], K_DUCKIE[1, 1], K_DUCKIE[0, 2], K_DUCKIE[1, 2]
+    want = np.column_stack([fx * X[:, 0] / X[:, 2] + cx, fy * X[:, 1] / X[:, 2] + cy])
+    expect_close(_call(fn, K_DUCKIE, R, t, X, 3), want, 1e-9, "pixels of points in front of an unmoved camera")
+
+
+def _case_pose(fn):
+    rng = np.random.default_rng(101)
+    R, t = random_pose(rng)
+    uv = np.column_stack([rng.uniform(20, 620, 6), rng.uniform(20, 460, 6)])
+    X = points_on_rays(K_DUCKIE, R, t, uv, rng.uniform(0.3, 1.5, 6))
+    expect_close(_call(fn, K_DUCKIE, R, t, X, 6), uv, 1e-8, "pixels of points seen by a rotated, moved camera")
+
+
+def _case_skew(fn):
+    rng = np.random.default_rng(102)
+    R, t = random_pose(rng)
+    uv = np.column_stack([rng.uniform(20, 620, 8), rng.uniform(20, 460, 8)])
+    X = points_on_rays(K_SKEWED, R, t, uv, rng.uniform(0.3, 1.5, 8))
+    expect_close(_call(fn, K_SKEWED, R, t, X, 8), uv, 1e-8, "pixels with a skewed K")
+
+
+def _case_opencv(fn):
+    rng = np.random.default_rng(103)
+    X = DUCKIETOWN_BOARD.object_points()
+    for _ in range(3):
+        R, t = random_pose(rng)
+        want = cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K_DUCKIE, None)[0].reshape(-1, 2)
+        expect_close(_call(fn, K_DUCKIE, R, t, X, len(X)), want, 1e-6, "board corners vs cv2.projectPoints")
+
+
+def _case_one_point(fn):
+    rng = np.random.default_rng(104)
+    R, t = random_pose(rng)
+    uv = np.array([[100.0, 400.0]])
+    X = points_on_rays(K_DUCKIE, R, t, uv, [0.7])
+    expect_close(_call(fn, K_DUCKIE, R, t, X, 1), uv, 1e-8, "a single point, X of shape (1, 3)")
+
+
+def check_project_points(fn: Callable) -> Report:
+    """Check ``project_points(K, R, t, X) -> (N, 2)`` (eqs. (1)-(2), no lens distortion).
+
+    Parameters
+    ----------
+    fn : the student's function; K (3, 3), R (3, 3) rotation world -> camera,
+        t (3,) translation, X (N, 3) world points
+
+    Returns
+    -------
+    Report (also printed)
+    """
+    return run_check("project_points", fn, [
+        Case("a point on the optical axis lands on the principal point (cx, cy)", _case_axis,
+             hint="camera-frame point Xc = R X + t; homogeneous pixel K Xc; divide by its third entry"),
+        Case("unmoved camera (R = I, t = 0): u = fx X/Z + cx, v = fy Y/Z + cy", _case_depth,
+             hint="divide the homogeneous pixel by its third coordinate (the depth Z), after multiplying by K"),
+        Case("rotated and moved camera", _case_pose,
+             hint="X holds one point per ROW: the camera-frame points are X @ R.T + t (not X @ R)"),
+        Case("skewed K (s = K[0, 1] != 0)", _case_skew,
+             hint="multiply by the whole K of eq. (1), skew included, rather than using fx, fy, cx, cy alone"),
+        Case("Duckietown board corners agree with cv2.projectPoints", _case_opencv,
+             hint="compare with cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K, None) on one pose"),
+        Case("a single point (N = 1)", _case_one_point,
+             hint="keep the result 2-D: shape (N, 2) even when N = 1 (avoid np.squeeze)"),
+    ])

@@ -1,0 +1,39 @@
+"""End-to-end: every student notebook runs, reports "not implemented yet", and passes once solved."""
+
+from __future__ import annotations
+
+import nbformat
+import pytest
+
+from dtscal_lib.release import inject_solutions
+from nbtools import COURSE, NOTEBOOK_BUDGET_S, NOTEBOOKS, SOLUTIONS, cell_errors, execute, exercise_functions, need, reports
+
+pytestmark = pytest.mark.slow
+
+
+def _student(name):
+    return nbformat.read(need(NOTEBOOKS / f"{name}.ipynb"), as_version=4)
+
+
+@pytest.mark.parametrize("name", COURSE)
+def test_untouched_student_notebook_runs_and_reports_not_implemented(name):
+    nb, seconds = execute(_student(name))
+    assert not cell_errors(nb), f"{name}: errors escaped cells: {cell_errors(nb)}"
+    found = reports(nb)
+    wanted = exercise_functions(nb)
+    assert wanted, f"{name}: no exercise cells"
+    assert {f for _, f in found} >= set(wanted), f"{name}: checks missing for {set(wanted) - {f for _, f in found}}"
+    assert all(mark == " " for mark, _ in found), f"{name}: expected only 'not implemented yet', got {found}"
+    assert seconds < NOTEBOOK_BUDGET_S, f"{name} took {seconds:.1f} s (budget {NOTEBOOK_BUDGET_S:g} s)"
+
+
+@pytest.mark.parametrize("name", COURSE)
+def test_pasted_solutions_pass_every_check(name):
+    solution = nbformat.read(need(SOLUTIONS / f"{name}.ipynb"), as_version=4)
+    nb, seconds = execute(inject_solutions(_student(name), solution))
+    assert not cell_errors(nb), f"{name}: errors escaped cells: {cell_errors(nb)}"
+    found = reports(nb)
+    wanted = exercise_functions(nb)
+    assert {f for _, f in found} >= set(wanted), f"{name}: checks missing for {set(wanted) - {f for _, f in found}}"
+    assert all(mark == "x" for mark, _ in found), f"{name}: not every check passed: {found}"
+    assert seconds < NOTEBOOK_BUDGET_S, f"{name} took {seconds:.1f} s (budget {NOTEBOOK_BUDGET_S:g} s)"
