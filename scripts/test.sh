@@ -6,4 +6,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh --test
-exec .venv/bin/python -m pytest tests solutions --nbval-lax-placeholder "$@"
+exec .venv/bin/python -m pytest tests solutions --nbval --nbval-current-env \
+     --nbval-sanitize-with solutions/nbval_sanitize.cfg "$@"
