@@ -27,6 +27,40 @@ from .sources import Frame, open_source
 
 #: fewer samples than this cannot give a trustworthy calibration
 MIN_SAMPLES = 3
+#: a view whose own reprojection RMS exceeds this many times the median view's is an outlier
+OUTLIER_FACTOR = 3.0
+#: never drop more than this share of the views as outliers
+MAX_OUTLIER_SHARE = 0.2
+
+
+def calibrate_without_outlier_views(object_points, image_points, image_size, **kw):
+    """Calibrate, drop views that fit far worse than the rest, calibrate again.
+
+    A detection can be wrong without looking wrong: on a motion-blurred frame the
+    detector may put a corner a pixel off. Such a view fits much worse than the
+    others (its own RMS is several times the median view's) and biases K by more
+    than the reported standard deviations admit. Views above ``OUTLIER_FACTOR`` x the
+    median per-view RMS are dropped (at most ``MAX_OUTLIER_SHARE`` of them, worst first)
+    and the calibration is repeated, until no view stands out.
+
+    Returns
+    -------
+    (CalibrationResult, list of dropped view indices into the inputs)
+    """
+    keep = list(range(len(object_points)))
+    dropped: list[int] = []
+    result = calibrate(object_points, image_points, image_size, **kw)
+    budget = int(MAX_OUTLIER_SHARE * len(keep))
+    while True:
+        pv = np.asarray(result.per_view_rms)
+        limit = OUTLIER_FACTOR * float(np.median(pv))
+        worst = [k for k in np.argsort(-pv) if pv[k] > limit]
+        worst = worst[: max(0, min(budget - len(dropped), len(keep) - MIN_SAMPLES))]
+        if not worst:
+            return result, sorted(dropped)
+        dropped += [keep[k] for k in worst]
+        keep = [i for k, i in enumerate(keep) if k not in set(worst)]
+        result = calibrate([object_points[i] for i in keep], [image_points[i] for i in keep], image_size, **kw)
 
 
 @dataclass
@@ -172,8 +206,11 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
             f"{MIN_SAMPLES} views at different positions and tilts: check --board/--square, and show the "
             "whole board (not touching the image border) at several places and angles"
         )
-    result = calibrate(obj, imgp, size, model=model, skew=skew)
-    run = IntrinsicRun(result, robot_name, tally, len(obj), tracker.bars(), src.describe())
+    result, dropped = calibrate_without_outlier_views(obj, imgp, size, model=model, skew=skew)
+    if dropped:
+        tally.used -= len(dropped)
+        tally.rejected["outlier_view"] += len(dropped)
+    run = IntrinsicRun(result, robot_name, tally, len(obj) - len(dropped), tracker.bars(), src.describe())
     if out_dir is not None:
         calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
         run.path = calib_files.save_intrinsics(calib, out_dir, robot_name)
