@@ -1,0 +1,543 @@
+"""Tests of the course self-checks for notebooks 03-05 (dtscal_lib.selfcheck.nb03/nb04/nb05).
+
+Each check must pass on a correct implementation (written here independently of the
+solution notebooks: OpenCV or dtscal_lib.camera wrapped, or a different derivation),
+fail on the typical mistakes students make, and report "not implemented yet" on a stub.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from dtscal_lib import camera as cam
+from dtscal_lib.selfcheck import FAIL, NOT_IMPLEMENTED, PASS
+from dtscal_lib.selfcheck import nb03, nb04, nb05
+
+
+def stub(*args, **kwargs):
+    raise NotImplementedError("write this function")
+
+
+def status(check, fn):
+    return _quiet(check, fn).status
+
+
+def _quiet(check, fn):
+    import contextlib
+    import io
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        return check(fn)
+
+
+# =========================================================================== nb03 references
+def ref_constraints(H):
+    """v_ij built from the quadratic form h_i^T B h_j, by differentiating with respect to b."""
+    H = np.asarray(H, dtype=float)
+    basis = []
+    for k in range(6):
+        e = np.zeros(6)
+        e[k] = 1.0
+        B = np.array([[e[0], e[1], e[3]], [e[1], e[2], e[4]], [e[3], e[4], e[5]]])
+        basis.append(B)
+    h1, h2 = H[:, 0], H[:, 1]
+    v12 = [h1 @ B @ h2 for B in basis]
+    d = [h1 @ B @ h1 - h2 @ B @ h2 for B in basis]
+    return np.array([v12, d])
+
+
+def ref_intrinsics(Hs):
+    """Closed form via a Cholesky factorisation of B (not Zhang's explicit formulas)."""
+    if len(Hs) < 3:
+        raise ValueError("need at least 3 views")
+    V = np.vstack([ref_constraints(H / np.linalg.norm(H)) for H in Hs])
+    b = np.linalg.svd(V)[2][-1]
+    B = np.array([[b[0], b[1], b[3]], [b[1], b[2], b[4]], [b[3], b[4], b[5]]])
+    if B[0, 0] < 0:
+        B = -B
+    L = np.linalg.cholesky(B)  # B = L L^T = K^-T K^-1  ->  K^-1 = L^T (up to scale)
+    K = np.linalg.inv(L.T)
+    return K / K[2, 2]
+
+
+def ref_extrinsics(K, H):
+    """Via OpenCV: decompose with K^-1, orthonormalise with cv2.Rodrigues round trip."""
+    A = np.linalg.solve(K, H)
+    lam = 1.0 / np.linalg.norm(A[:, 0])
+    if A[2, 2] * lam < 0:
+        lam = -lam
+    r1, r2, t = lam * A[:, 0], lam * A[:, 1], lam * A[:, 2]
+    M = np.column_stack([r1, r2, np.cross(r1, r2)])
+    U, _, Vt = np.linalg.svd(M)
+    R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
+    return R, t
+
+
+# wrong variants --------------------------------------------------------------------------
+def constraints_transposed(H):
+    return ref_constraints(np.asarray(H).T)
+
+
+def constraints_swapped_rows(H):
+    return ref_constraints(H)[::-1]
+
+
+def constraints_single_cross_term(H):
+    H = np.asarray(H, float)
+    h1, h2 = H[:, 0], H[:, 1]
+
+    def v(a, c):  # forgot the symmetric partner of each off-diagonal product
+        return np.array([a[0] * c[0], a[0] * c[1], a[1] * c[1], a[2] * c[0], a[2] * c[1], a[2] * c[2]])
+
+    return np.array([v(h1, h2), v(h1, h1) - v(h2, h2)])
+
+
+def intrinsics_zero_skew(Hs):
+    K = ref_intrinsics(Hs)
+    K[0, 1] = 0.0
+    return K
+
+
+def intrinsics_no_sign_fix(Hs):
+    V = np.vstack([ref_constraints(H) for H in Hs])
+    b = np.linalg.svd(V)[2][-1]
+    b = -b if b[0] > 0 else b  # force the wrong sign
+    B = np.array([[b[0], b[1], b[3]], [b[1], b[2], b[4]], [b[3], b[4], b[5]]])
+    L = np.linalg.cholesky(B)  # fails: B is negative definite
+    K = np.linalg.inv(L.T)
+    return K / K[2, 2]
+
+
+def intrinsics_transposed_H(Hs):
+    return ref_intrinsics([np.asarray(H).T for H in Hs])
+
+
+def intrinsics_no_view_check(Hs):
+    V = np.vstack([ref_constraints(H / np.linalg.norm(H)) for H in Hs])
+    b = np.linalg.svd(V)[2][-1]
+    B = np.array([[b[0], b[1], b[3]], [b[1], b[2], b[4]], [b[3], b[4], b[5]]])
+    B = -B if B[0, 0] < 0 else B
+    w, Q = np.linalg.eigh(B)
+    B = Q @ np.diag(np.abs(w) + 1e-12) @ Q.T
+    K = np.linalg.inv(np.linalg.cholesky(B).T)
+    return K / K[2, 2]
+
+
+def extrinsics_det_minus_one(K, H):
+    R, t = ref_extrinsics(K, H)
+    R = R.copy()
+    R[:, 2] = -R[:, 2]
+    return R, t
+
+
+def extrinsics_behind(K, H):
+    A = np.linalg.solve(K, H)
+    lam = 1.0 / np.linalg.norm(A[:, 0])  # no sign fix
+    r1, r2, t = lam * A[:, 0], lam * A[:, 1], lam * A[:, 2]
+    M = np.column_stack([r1, r2, np.cross(r1, r2)])
+    U, _, Vt = np.linalg.svd(M)
+    return U @ Vt, t
+
+
+def extrinsics_no_svd(K, H):
+    A = np.linalg.solve(K, H)
+    lam = 1.0 / np.linalg.norm(A[:, 0])
+    if A[2, 2] * lam < 0:
+        lam = -lam
+    r1, r2, t = lam * A[:, 0], lam * A[:, 1], lam * A[:, 2]
+    return np.column_stack([r1, r2, np.cross(r1, r2)]), t
+
+
+# =========================================================================== nb03 tests
+def test_constraints_pass_fail_stub():
+    assert status(nb03.check_intrinsic_constraints, ref_constraints) == PASS
+    assert status(nb03.check_intrinsic_constraints, stub) == NOT_IMPLEMENTED
+    for wrong in (constraints_transposed, constraints_swapped_rows, constraints_single_cross_term):
+        assert status(nb03.check_intrinsic_constraints, wrong) == FAIL, wrong.__name__
+
+
+def test_intrinsics_pass_fail_stub():
+    assert status(nb03.check_intrinsics_from_homographies, ref_intrinsics) == PASS
+    assert status(nb03.check_intrinsics_from_homographies, stub) == NOT_IMPLEMENTED
+    for wrong in (intrinsics_zero_skew, intrinsics_no_sign_fix, intrinsics_transposed_H, intrinsics_no_view_check):
+        assert status(nb03.check_intrinsics_from_homographies, wrong) == FAIL, wrong.__name__
+
+
+def test_intrinsics_report_names_the_too_few_views_case():
+    rep = _quiet(nb03.check_intrinsics_from_homographies, intrinsics_no_view_check)
+    failed = [r.title for r in rep.results if r.status == FAIL]
+    assert failed == ["refuses fewer than 3 views with a ValueError"]
+    assert "len(Hs) >= 3" in rep.text()
+
+
+def test_extrinsics_pass_fail_stub():
+    assert status(nb03.check_extrinsics_from_homography, ref_extrinsics) == PASS
+    assert status(nb03.check_extrinsics_from_homography, stub) == NOT_IMPLEMENTED
+    for wrong in (extrinsics_det_minus_one, extrinsics_behind, extrinsics_no_svd):
+        assert status(nb03.check_extrinsics_from_homography, wrong) == FAIL, wrong.__name__
+
+
+def test_extrinsics_behind_message_says_behind():
+    rep = _quiet(nb03.check_extrinsics_from_homography, extrinsics_behind)
+    assert "BEHIND" in rep.text()
+
+
+def test_synthetic_views_are_exact_and_in_front():
+    Hs, Rs, ts = nb03.synthetic_views(nb03.K_SKEWED, 5, seed=1)
+    obj = nb03.DUCKIETOWN_BOARD.object_points()
+    for H, R, t in zip(Hs, Rs, ts):
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        Xc = obj @ R.T + t
+        assert np.all(Xc[:, 2] > 0.2)
+        uv = cam.project_points(obj, R, t, nb03.K_SKEWED)
+        p = np.column_stack([obj[:, :2], np.ones(len(obj))]) @ H.T
+        np.testing.assert_allclose(p[:, :2] / p[:, 2:], uv, atol=1e-9)
+        assert np.all((uv > 0) & (uv < [640, 480]))
+
+
+# =========================================================================== nb04 references
+def ref_distort(xy, dist):
+    return cam.distort_normalized(xy, dist)
+
+
+def ref_undistort(xy_d, dist):
+    return cam.undistort_normalized(xy_d, dist)
+
+
+def ref_maps(K, dist, new_K, size):
+    # OpenCV with the roles spelled out (the check compares with the same function, so also
+    # exercise the library's independent implementation below)
+    return cv2.initUndistortRectifyMap(K, dist, None, new_K, tuple(size), cv2.CV_32FC1)
+
+
+def lib_maps(K, dist, new_K, size):
+    return cam.rectification_maps(K, dist, new_K, size)
+
+
+def distort_wrong_tangential_sign(xy, dist):
+    d = np.array(dist, float)
+    d[2:4] = -d[2:4]
+    return cam.distort_normalized(xy, d)
+
+
+def distort_swapped_p(xy, dist):
+    d = np.array(dist, float)
+    d[[2, 3]] = d[[3, 2]]
+    return cam.distort_normalized(xy, d)
+
+
+def distort_r_not_squared(xy, dist):
+    xy = np.asarray(xy, float)
+    k1, k2, p1, p2, k3 = dist
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    radial = 1 + k1 * r + k2 * r**2 + k3 * r**3
+    return xy * radial[:, None]
+
+
+def undistort_fixed_point(xy_d, dist, n_iter=200):
+    xy_d = np.asarray(xy_d, float)
+    k1, k2, p1, p2, k3 = dist
+    x = xy_d.copy()
+    for _ in range(n_iter):
+        r2 = (x**2).sum(1)
+        rad = 1 + k1 * r2 + k2 * r2**2 + k3 * r2**3
+        dx = 2 * p1 * x[:, 0] * x[:, 1] + p2 * (r2 + 2 * x[:, 0] ** 2)
+        dy = p1 * (r2 + 2 * x[:, 1] ** 2) + 2 * p2 * x[:, 0] * x[:, 1]
+        x = np.column_stack([(xy_d[:, 0] - dx) / rad, (xy_d[:, 1] - dy) / rad])
+    return x
+
+
+def undistort_opencv_default(xy_d, dist):
+    return cv2.undistortPoints(np.asarray(xy_d, float).reshape(-1, 1, 2), np.eye(3), np.asarray(dist, float)).reshape(-1, 2)
+
+
+def undistort_returns_distorted(xy_d, dist):  # "forgot to invert": distorts again
+    return cam.distort_normalized(xy_d, dist)
+
+
+def maps_swapped(K, dist, new_K, size):
+    mx, my = cam.rectification_maps(K, dist, new_K, size)
+    return my, mx
+
+
+def maps_transposed_shape(K, dist, new_K, size):
+    mx, my = cam.rectification_maps(K, dist, new_K, size)
+    return np.ascontiguousarray(mx.T), np.ascontiguousarray(my.T)
+
+
+def maps_ignore_new_K(K, dist, new_K, size):
+    return cam.rectification_maps(K, dist, K, size)
+
+
+def maps_float64(K, dist, new_K, size):
+    return cam.rectification_maps(K, dist, new_K, size, dtype=np.float64)
+
+
+def maps_undistort_instead(K, dist, new_K, size):  # inverse direction: undistorts pixel positions
+    w, h = size
+    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    uv = np.column_stack([u.ravel(), v.ravel()])
+    out = cv2.undistortPoints(uv.reshape(-1, 1, 2), K, dist, P=new_K).reshape(-1, 2)
+    return out[:, 0].reshape(h, w).astype(np.float32), out[:, 1].reshape(h, w).astype(np.float32)
+
+
+# =========================================================================== nb04 tests
+def test_distort_pass_fail_stub():
+    assert status(nb04.check_distort_normalized, ref_distort) == PASS
+    assert status(nb04.check_distort_normalized, stub) == NOT_IMPLEMENTED
+    for wrong in (distort_wrong_tangential_sign, distort_swapped_p, distort_r_not_squared):
+        assert status(nb04.check_distort_normalized, wrong) == FAIL, wrong.__name__
+
+
+def test_distort_wrong_sign_fails_only_tangential_cases():
+    rep = _quiet(nb04.check_distort_normalized, distort_wrong_tangential_sign)
+    failed = {r.title for r in rep.results if r.status == FAIL}
+    assert "tangential terms p1, p2" in failed
+    assert "k1 only" not in failed
+
+
+def test_undistort_pass_fail_stub():
+    assert status(nb04.check_undistort_normalized, ref_undistort) == PASS
+    assert status(nb04.check_undistort_normalized, stub) == NOT_IMPLEMENTED
+    for wrong in (undistort_opencv_default, undistort_returns_distorted):
+        assert status(nb04.check_undistort_normalized, wrong) == FAIL, wrong.__name__
+
+
+def test_fixed_point_fails_only_at_the_corners():
+    rep = _quiet(nb04.check_undistort_normalized, undistort_fixed_point)
+    failed = [r.title for r in rep.results if r.status == FAIL]
+    assert failed == ["inverts the Duckiebot lens at the four image corners"]
+    assert "Newton" in rep.text()
+
+
+def test_maps_pass_fail_stub():
+    assert status(nb04.check_rectification_maps, ref_maps) == PASS
+    assert status(nb04.check_rectification_maps, lib_maps) == PASS
+    assert status(nb04.check_rectification_maps, stub) == NOT_IMPLEMENTED
+    for wrong in (maps_swapped, maps_transposed_shape, maps_ignore_new_K, maps_float64, maps_undistort_instead):
+        assert status(nb04.check_rectification_maps, wrong) == FAIL, wrong.__name__
+
+
+def test_opencv_distort_matches_library():
+    xy = np.random.default_rng(0).uniform(-1, 1, (20, 2))
+    np.testing.assert_allclose(nb04.opencv_distort(xy, nb04.DIST_TANGENTIAL),
+                               cam.distort_normalized(xy, nb04.DIST_TANGENTIAL), atol=1e-12)
+
+
+# =========================================================================== nb05
+def ref_ground(cols, rows, square, x0, y0):
+    k = np.arange(cols * rows)
+    return np.column_stack([x0 + (k // cols) * square, y0 + (k % cols) * square])
+
+
+def ground_rows_cols_swapped(cols, rows, square, x0, y0):
+    return ref_ground(rows, cols, square, x0, y0)
+
+
+def ground_far_first(cols, rows, square, x0, y0):
+    return ref_ground(cols, rows, square, x0, y0).reshape(rows, cols, 2)[::-1].reshape(-1, 2)
+
+
+def ground_x_y_swapped(cols, rows, square, x0, y0):
+    return ref_ground(cols, rows, square, x0, y0)[:, ::-1]
+
+
+def ground_rightward(cols, rows, square, x0, y0):
+    k = np.arange(cols * rows)
+    return np.column_stack([x0 + (k // cols) * square, y0 - (k % cols) * square])
+
+
+def ref_p2g(H, uv):
+    return cv2.perspectiveTransform(np.asarray(uv, float).reshape(-1, 1, 2), np.asarray(H, float)).reshape(-1, 2)
+
+
+def p2g_transposed(H, uv):
+    return ref_p2g(np.asarray(H).T, uv)
+
+
+def p2g_no_divide(H, uv):
+    uv = np.asarray(uv, float)
+    return (np.column_stack([uv, np.ones(len(uv))]) @ np.asarray(H).T)[:, :2]
+
+
+def p2g_divide_by_h33(H, uv):
+    H = np.asarray(H, float)
+    return p2g_no_divide(H / H[2, 2], uv)
+
+
+def test_ground_points_pass_fail_stub():
+    assert status(nb05.check_board_ground_points, ref_ground) == PASS
+    assert status(nb05.check_board_ground_points, stub) == NOT_IMPLEMENTED
+    for wrong in (ground_rows_cols_swapped, ground_far_first, ground_x_y_swapped, ground_rightward):
+        assert status(nb05.check_board_ground_points, wrong) == FAIL, wrong.__name__
+
+
+def test_ground_points_wrong_order_message():
+    rep = _quiet(nb05.check_board_ground_points, ground_far_first)
+    assert "wrong order" in rep.text()
+
+
+def test_pixel_to_ground_pass_fail_stub():
+    assert status(nb05.check_pixel_to_ground, ref_p2g) == PASS
+    assert status(nb05.check_pixel_to_ground, stub) == NOT_IMPLEMENTED
+    for wrong in (p2g_transposed, p2g_no_divide, p2g_divide_by_h33):
+        assert status(nb05.check_pixel_to_ground, wrong) == FAIL, wrong.__name__
+
+
+# =========================================================================== the notebooks' plumbing
+from pathlib import Path  # noqa: E402
+
+import nbformat  # noqa: E402
+
+from dtscal_lib import duckietown as dt  # noqa: E402
+from dtscal_lib import figures as fig  # noqa: E402
+from dtscal_lib.release import student_notebook  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+COURSE = {
+    "03_intrinsic_calibration.ipynb": {
+        "intrinsic_constraints": nb03.check_intrinsic_constraints,
+        "intrinsics_from_homographies": nb03.check_intrinsics_from_homographies,
+        "extrinsics_from_homography": nb03.check_extrinsics_from_homography,
+    },
+    "04_distortion_rectification.ipynb": {
+        "distort_normalized": nb04.check_distort_normalized,
+        "undistort_normalized": nb04.check_undistort_normalized,
+        "rectification_maps": nb04.check_rectification_maps,
+    },
+    "05_extrinsic_calibration.ipynb": {
+        "board_ground_points": nb05.check_board_ground_points,
+        "pixel_to_ground": nb05.check_pixel_to_ground,
+    },
+}
+
+
+@pytest.mark.parametrize("nb_name", sorted(COURSE))
+def test_solution_notebook_functions_pass_and_student_stubs_do_not(nb_name, tmp_path, capsys):
+    sol = ROOT / "solutions" / nb_name
+    assert sol.exists(), f"{sol} is missing"
+    student = tmp_path / nb_name
+    nbformat.write(student_notebook(nbformat.read(str(sol), as_version=4), nb_name), str(student))
+    for func, check in COURSE[nb_name].items():
+        solved = fig.notebook_function(nb_name, func, nb_dir=sol.parent)
+        assert solved is not None, capsys.readouterr().out
+        assert status(check, solved) == PASS, (func, _quiet(check, solved).text())
+        stubbed = fig.notebook_function(nb_name, func, nb_dir=tmp_path)
+        assert stubbed is not None
+        assert status(check, stubbed) == NOT_IMPLEMENTED, func
+
+
+def test_exercise_signatures_are_the_graded_ones():
+    import inspect
+
+    want = {
+        "intrinsic_constraints": ["H"], "intrinsics_from_homographies": ["Hs"],
+        "extrinsics_from_homography": ["K", "H"], "distort_normalized": ["xy", "dist"],
+        "undistort_normalized": ["xy_d", "dist"], "rectification_maps": ["K", "dist", "new_K", "size"],
+        "board_ground_points": ["cols", "rows", "square", "x0", "y0"], "pixel_to_ground": ["H", "uv"],
+    }
+    for nb_name, funcs in COURSE.items():
+        for func in funcs:
+            fn = fig.notebook_function(nb_name, func, nb_dir=ROOT / "solutions")
+            assert list(inspect.signature(fn).parameters) == want[func], func
+
+
+def test_notebook_function_reports_unloadable(tmp_path, capsys):
+    assert fig.notebook_function("nope.ipynb", "f", nb_dir=tmp_path) is None
+    assert "is not in" in capsys.readouterr().out
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("import numpy as np"),
+                                         nbformat.v4.new_code_cell("def f(:\n    pass")])
+    nb.cells[0].metadata["tags"] = ["imports"]
+    nb.cells[1].metadata["tags"] = ["exercise"]
+    nbformat.write(nb, str(tmp_path / "bad.ipynb"))
+    assert fig.notebook_function("bad.ipynb", "f", nb_dir=tmp_path) is None
+    assert "SyntaxError" in capsys.readouterr().out
+
+
+def test_use_or_fallback_stub_uses_fallback_with_message(capsys):
+    f = fig.use_or_fallback(stub, ref_p2g, name="pixel_to_ground", check=nb05.check_pixel_to_ground)
+    out = capsys.readouterr().out
+    assert not f.uses_student and "not implemented yet" in out and "until your function works" in out
+    np.testing.assert_allclose(f(dt.default_H(), [[320.0, 479.0]]), ref_p2g(dt.default_H(), [[320.0, 479.0]]))
+
+
+def test_use_or_fallback_wrong_function_uses_fallback(capsys):
+    f = fig.use_or_fallback(p2g_transposed, ref_p2g, check=nb05.check_pixel_to_ground)
+    assert not f.uses_student and "does not pass its self-check" in capsys.readouterr().out
+
+
+def test_use_or_fallback_correct_function_is_used_and_failures_fall_back(capsys):
+    f = fig.use_or_fallback(ref_p2g, p2g_no_divide, check=nb05.check_pixel_to_ground)
+    assert f.uses_student and f.chosen is ref_p2g
+    calls = []
+
+    def flaky(H, uv):
+        calls.append(1)
+        raise RuntimeError("boom")
+
+    g = fig.use_or_fallback(flaky, ref_p2g)
+    capsys.readouterr()
+    np.testing.assert_allclose(g(dt.default_H(), [[1.0, 400.0]]), ref_p2g(dt.default_H(), [[1.0, 400.0]]))
+    assert calls and "RuntimeError: boom" in capsys.readouterr().out
+    h = fig.use_or_fallback(None, ref_p2g, name="estimate_homography")
+    assert not h.uses_student and "not available" in capsys.readouterr().out
+
+
+def test_find_corners_on_a_rendered_board():
+    from dtscal_lib.plots import render_board_image
+
+    K, d = dt.default_K(), dt.default_dist()
+    R = cv2.Rodrigues(np.array([0.3, -0.2, 0.05]))[0]
+    t = np.array([-0.09, -0.06, 0.35])
+    img = render_board_image(K, d, R, t)
+    c = fig.find_corners(img)
+    truth = cam.project_points(nb03.DUCKIETOWN_BOARD.object_points(), R, t, K, d)
+    assert c is not None
+    if np.linalg.norm(c[0] - truth[-1]) < np.linalg.norm(c[0] - truth[0]):
+        c = c[::-1]
+    assert np.abs(c - truth).max() < 0.5
+
+
+def test_sample_views_keep_the_board_inside_the_image():
+    K = dt.default_K()
+    obj = nb03.DUCKIETOWN_BOARD.object_points()
+    for R, t in fig.sample_views(K, 8, seed=3, min_tilt_deg=20, max_tilt_deg=45, dist=dt.default_dist()):
+        uv = cam.project_points(obj, R, t, K, dt.default_dist())
+        assert np.all((uv > 8) & (uv < np.array(dt.IMAGE_SIZE) - 8))
+        tilt = np.degrees(np.arccos(R[2, 2]))
+        assert 20 - 1e-6 <= tilt <= 45 + 1e-6
+
+
+def test_degradation_experiment_shows_parallel_views_are_worse():
+    text = fig.degradation_experiment(ref_intrinsics, dt.default_K(), view_counts=(10,),
+                                      tilts=((0.5, 2.0), (20.0, 45.0)), trials=3)
+    rows = [l for l in text.splitlines() if "deg" in l and l.strip()[0].isdigit()]
+    vals = [float(r.split()[2]) for r in rows]
+    assert vals[0] > 10 * vals[1]
+
+
+def test_ground_error_report_is_zero_for_the_true_homography():
+    from dtscal_lib.boards import ground_points
+    from dtscal_lib.ground import ground_to_pixel
+
+    H = dt.default_H()
+    g = ground_points()
+    text = fig.ground_error_report(H, H, ground_to_pixel(H, g), g)
+    assert "mean 0.00 mm, max 0.00 mm" in text
+    assert text.count("0.00mm") == 8
+
+
+def test_distort_image_is_undone_by_the_rectification_maps():
+    K, d = dt.default_K(), dt.default_dist()
+    ideal = cv2.GaussianBlur(fig.grid_image((160, 120), spacing=20, thickness=3), (0, 0), 2.0).astype(float)
+    K_small = K.copy()
+    K_small[:2] /= 4
+    bent = fig.distort_image(ideal.astype(np.float32), K_small, d)
+    mx, my = cam.rectification_maps(K_small, d, K_small, (160, 120))
+    back = cv2.remap(bent, mx, my, cv2.INTER_LINEAR)
+    inner = (slice(15, 105), slice(20, 140))
+    err_back = np.mean(np.abs(back[inner] - ideal[inner]))
+    err_bent = np.mean(np.abs(bent[inner] - ideal[inner]))
+    assert err_back < 3.0 and err_bent > 5 * err_back, (err_back, err_bent)
