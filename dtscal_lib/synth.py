@@ -916,24 +916,10 @@ def extrinsic_capture(seed: int = DEFAULT_SEED, *, n_frames: int = 5, mount: Rob
 
 # =========================================================================== storage
 def _write_bag(path: Path, topic: str, frame_id: str, frames: list[SynthFrame]) -> None:
-    """Write a ROS 1 bag (v2.0) of ``sensor_msgs/CompressedImage`` messages."""
-    from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_typestore
+    """Write the frames as a ROS 1 bag of ``sensor_msgs/CompressedImage`` (what ``rosbag record`` writes)."""
+    from .sources import write_compressed_image_bag
 
-    store = get_typestore(Stores.ROS1_NOETIC)
-    Header = store.types["std_msgs/msg/Header"]
-    Time = store.types["builtin_interfaces/msg/Time"]
-    Compressed = store.types["sensor_msgs/msg/CompressedImage"]
-    msgtype = "sensor_msgs/msg/CompressedImage"
-    if path.exists():
-        path.unlink()
-    with Writer(path) as writer:
-        conn = writer.add_connection(topic, msgtype, typestore=store)
-        for f in frames:
-            sec, nsec = divmod(int(f.stamp_ns), 10**9)
-            msg = Compressed(header=Header(seq=int(f.index), stamp=Time(sec=sec, nanosec=nsec), frame_id=frame_id),
-                             format="jpeg", data=np.frombuffer(f.jpeg, dtype=np.uint8))
-            writer.write(conn, int(f.stamp_ns), store.serialize_ros1(msg, msgtype))
+    write_compressed_image_bag(path, topic, ((int(f.stamp_ns), f.jpeg) for f in frames), frame_id=frame_id)
 
 
 def _list(a, nd: int = 6):

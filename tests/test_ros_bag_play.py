@@ -376,3 +376,33 @@ def test_rosbag_record_output_is_read(roscore, tmp_path):
     for i, f in enumerate(good):
         assert f.ok
         np.testing.assert_array_equal(f.image, cv2.imdecode(np.frombuffer(jpegs[i], np.uint8), cv2.IMREAD_COLOR))
+
+
+def test_shipped_session_plays_with_ros(roscore, tmp_path):
+    """The bundled recording itself is a bag ROS's own tools accept and publish."""
+    from dtscal_lib import datasets
+
+    env = roscore
+    topic = "/synthbot/camera_node/image/compressed"
+    for name, n in (("intrinsics.bag", 406), ("extrinsics.bag", 5)):
+        info = _run([_ros_tool("rosbag"), "info", "--yaml", str(datasets.session_dir() / name)], env)
+        assert info.returncode == 0, info.stderr
+        meta = yaml.safe_load(info.stdout)
+        assert meta["messages"] == n and meta["topics"][0]["topic"] == topic
+    script = tmp_path / "sub.py"
+    script.write_text(SUBSCRIBER)
+    received = tmp_path / "received.json"
+    sub_log = tmp_path / "sub.log"
+    with _started([SYSTEM_PYTHON, str(script), topic, "5", str(received), "90"], env, sub_log) as sub:
+        deadline = time.time() + 60
+        while "READY" not in _log(sub_log):
+            assert sub.poll() is None, f"subscriber died:\n{_log(sub_log)}"
+            assert time.time() < deadline, f"subscriber not ready:\n{_log(sub_log)}"
+            time.sleep(0.1)
+        play = _run([_ros_tool("rosbag"), "play", "--quiet", "--wait-for-subscribers", "-d", "1",
+                     str(datasets.session_dir() / "extrinsics.bag")], env)
+        assert play.returncode == 0, play.stdout + play.stderr
+        sub.wait(timeout=90)
+    got = json.loads(received.read_text())
+    expected = [d for _, _, d in datasets.read_bag_jpegs(datasets.session_dir() / "extrinsics.bag")]
+    assert [g["sha256"] for g in got] == [__import__("hashlib").sha256(d).hexdigest() for d in expected]
