@@ -1,0 +1,129 @@
+"""Benchmark: intrinsic calibration of 40 samples, dtscal vs raw ``cv2.calibrateCamera``.
+
+The input is what a full CALIBRATE press gives ROS's calibrator: 40 views of the 7x5
+Duckietown board (31 mm squares) at realistic poses (0.25-0.8 m, tilts up to 40
+degrees, spread over the image) through the default Duckiebot camera
+(``camera_intrinsic/default.yaml``: fx 308, k1 -0.257), with 0.2 px Gaussian noise on
+the corners. Both calibrate ``plumb_bob`` with k3 fixed at 0, as ROS does.
+
+Baseline, measured in the same run: ``cv2.calibrateCamera(..., flags=CALIB_FIX_K3)``
+(what ROS runs). Target for ``dtscal_lib.calibration.calibrate``: < 0.5 s median.
+
+Run::
+
+    .venv/bin/python benchmarks/bench_calibrate.py [--json] [--check] [--repeats N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from common import median_time, random_visible_pose  # noqa: E402
+
+from dtscal_lib import duckietown as dt  # noqa: E402
+from dtscal_lib.boards import DUCKIETOWN_BOARD  # noqa: E402
+
+TARGET_S = 0.5
+N_SAMPLES = 40
+NOISE_PX = 0.2
+
+
+def make_views(seed: int = 1, n: int = N_SAMPLES, noise: float = NOISE_PX):
+    """40 noisy views of the board through the default Duckiebot camera."""
+    rng = np.random.default_rng(seed)
+    K, dist = dt.default_K(), dt.default_dist()
+    obj = DUCKIETOWN_BOARD.object_points()
+    objs, imgs = [], []
+    for _ in range(n):
+        _, _, corners = random_visible_pose(rng, DUCKIETOWN_BOARD, K, dist, distance=(0.25, 0.8),
+                                            max_tilt=0.7, margin=10)
+        objs.append(obj.copy())
+        imgs.append(corners + rng.normal(0.0, noise, corners.shape))
+    return objs, imgs
+
+
+def opencv_calibrate(objs, imgs, size):
+    rms, K, d, _, _ = cv2.calibrateCamera([o.astype(np.float32) for o in objs],
+                                          [i.astype(np.float32).reshape(-1, 1, 2) for i in imgs],
+                                          size, None, None, flags=cv2.CALIB_FIX_K3)
+    return float(rms), K, d.ravel()
+
+
+def load_dtscal_calibrate():
+    """``dtscal_lib.calibration.calibrate`` or None if that module is not there yet."""
+    try:
+        from dtscal_lib.calibration import calibrate
+    except ImportError as e:  # reported, not hidden: the table says which one ran
+        print(f"note: dtscal_lib.calibration not importable ({e}); timing OpenCV only", file=sys.stderr)
+        return None
+    return calibrate
+
+
+def run(repeats: int) -> dict:
+    objs, imgs = make_views()
+    size = dt.IMAGE_SIZE
+    K_true, d_true = dt.default_K(), dt.default_dist()
+    out = {"n_samples": len(objs), "noise_px": NOISE_PX, "target_s": TARGET_S}
+    t_cv = median_time(opencv_calibrate, objs, imgs, size, repeats=repeats, warmup=1)
+    rms, K, d = opencv_calibrate(objs, imgs, size)
+    out["opencv"] = {"median_s": t_cv, "rms_px": rms, "fx_err": float(K[0, 0] - K_true[0, 0]),
+                     "cx_err": float(K[0, 2] - K_true[0, 2]), "k1_err": float(d[0] - d_true[0])}
+    calibrate = load_dtscal_calibrate()
+    if calibrate is not None:
+        def ours():
+            return calibrate(objs, imgs, size, model="plumb_bob", skew=False)
+        t_ours = median_time(ours, repeats=repeats, warmup=1)
+        res = ours()
+        out["dtscal"] = {"median_s": t_ours, "rms_px": float(res.rms),
+                         "fx_err": float(res.K[0, 0] - K_true[0, 0]), "cx_err": float(res.K[0, 2] - K_true[0, 2]),
+                         "k1_err": float(res.dist[0] - d_true[0]), "ratio_to_opencv": t_ours / t_cv,
+                         "meets_target": t_ours < TARGET_S}
+    return out
+
+
+def print_report(r: dict) -> None:
+    print(f"Calibration of {r['n_samples']} samples (7x5 board, Duckiebot lens, {r['noise_px']} px noise), "
+          "plumb_bob with k3 fixed; baseline: cv2.calibrateCamera (ROS's call) in the same run")
+    print(f"{'':24s} {'median time':>12s} {'time/OpenCV':>11s} {'rms px':>8s} {'fx err':>8s} {'cx err':>8s} "
+          f"{'k1 err':>9s}")
+    rows = [("cv2.calibrateCamera", r["opencv"], 1.0)]
+    if "dtscal" in r:
+        rows.insert(0, ("dtscal calibrate()", r["dtscal"], r["dtscal"]["ratio_to_opencv"]))
+    for name, v, ratio in rows:
+        print(f"{name:24s} {v['median_s'] * 1e3:9.1f} ms {ratio:10.2f}x {v['rms_px']:8.3f} {v['fx_err']:8.3f} "
+              f"{v['cx_err']:8.3f} {v['k1_err']:9.5f}")
+    if "dtscal" in r:
+        mark = "ok" if r["dtscal"]["meets_target"] else "MISSED"
+        print(f"target: dtscal calibrate() < {r['target_s']} s: {mark}")
+    else:
+        print("dtscal calibrate() not available: only the baseline was timed")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    ap.add_argument("--check", action="store_true", help="exit 1 if the target is missed")
+    ap.add_argument("--repeats", type=int, default=5, help="runs per timing (median)")
+    args = ap.parse_args(argv)
+    r = run(args.repeats)
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        print_report(r)
+    if args.check and not r.get("dtscal", {}).get("meets_target", False):
+        print("target missed (or dtscal calibrate() unavailable)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

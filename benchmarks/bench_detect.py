@@ -1,0 +1,262 @@
+"""Benchmark: corner detection time, detection rate and accuracy against ROS's detector.
+
+Baseline, measured in the same run: ROS ``camera_calibration``'s call, OpenCV's classic
+``findChessboardCorners(ADAPTIVE_THRESH | NORMALIZE_IMAGE | FAST_CHECK)`` on the full
+frame (``dtscal_lib.detect.detect_board_ros`` adds the same ordering / cornerSubPix /
+border rule as ours, which cost well under a millisecond).
+
+Part 1 (timing): median time per 640x480 frame for one cluttered frame without a board
+and one realistic Duckiebot frame with a board. Target: <= 15 ms for both.
+
+Part 2 (quality, skipped with ``--quick``): a set of rendered frames with exact ground
+truth (Duckiebot barrel distortion, blur, noise, JPEG, cluttered backgrounds, boards
+from 0.25 m to 1.2 m away) and board-free frames of five clutter kinds: detection rate,
+false detections, corner error, time distribution.
+
+Part 3 (if ``data/session`` holds the synthetic recording, skipped with ``--quick``): both
+detectors on every frame of ``intrinsics.bag`` against the corners in ``truth.yaml``.
+
+Run::
+
+    .venv/bin/python benchmarks/bench_detect.py            # tables
+    .venv/bin/python benchmarks/bench_detect.py --json     # numbers as JSON
+    .venv/bin/python benchmarks/bench_detect.py --check    # exit 1 if the target is missed
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from common import FrameRenderer, clutter_image, look_at_pose, median_time, random_visible_pose  # noqa: E402
+
+from dtscal_lib.detect import detect_board, detect_board_ros, order_corners  # noqa: E402
+
+TARGET_MS = 15.0
+KINDS = ("tiles", "rects", "office", "noise", "mixed")
+
+
+def timing_frames(renderer: FrameRenderer, seed: int = 3):
+    """The two timing frames: a cluttered board-free frame and a realistic board frame."""
+    rng = np.random.default_rng(seed)
+    # "rects": hundreds of boxes, the classic detector's slow case (its fast check passes)
+    empty = renderer.render_empty(clutter_image(rng, kind="rects"), rng).image
+    r, t = look_at_pose(renderer.board, 0.5, 0.35, -0.25, 0.2, (0.04, 0.02))
+    board = renderer.render(r, t, clutter_image(rng, kind="office"), rng, blur=1.0, noise=3.0,
+                            jpeg_quality=80)
+    return empty, board
+
+
+def part_timing(renderer: FrameRenderer, repeats: int) -> dict:
+    empty, board = timing_frames(renderer)
+    out = {}
+    for name, img in (("no board (cluttered)", empty), ("board (Duckiebot lens)", board.image)):
+        ours = median_time(detect_board, img, repeats=repeats)
+        ros = median_time(detect_board_ros, img, repeats=repeats)
+        d = detect_board(img)
+        out[name] = {"ours_ms": ours * 1e3, "ros_ms": ros * 1e3, "speedup": ros / ours,
+                     "found": bool(d.found), "target_ms": TARGET_MS, "meets_target": ours * 1e3 <= TARGET_MS}
+    return out
+
+
+def make_quality_set(renderer: FrameRenderer, n_boards: int, n_empty: int, seed: int = 7):
+    rng = np.random.default_rng(seed)
+    boards = []
+    for k in range(n_boards):
+        r, t, _ = random_visible_pose(rng, renderer.board, distance=(0.25, 1.2), max_tilt=0.8, margin=12)
+        f = renderer.render(r, t, clutter_image(rng, kind=KINDS[k % len(KINDS)]), rng,
+                            blur=rng.uniform(0.5, 1.6), noise=rng.uniform(2, 7),
+                            jpeg_quality=int(rng.integers(50, 95)), contrast=rng.uniform(0.4, 0.85))
+        boards.append((f.image, f.corners))
+    empties = [(KINDS[k % len(KINDS)], renderer.render_empty(clutter_image(rng, kind=KINDS[k % len(KINDS)]), rng).image)
+               for k in range(n_empty)]
+    return boards, empties
+
+
+def _timed(fn, img):
+    t0 = time.perf_counter()
+    d = fn(img)
+    return d, time.perf_counter() - t0
+
+
+def part_quality(renderer: FrameRenderer, n_boards: int, n_empty: int) -> dict:
+    boards, empties = make_quality_set(renderer, n_boards, n_empty)
+    out = {}
+    for name, fn in (("ours", detect_board), ("ros", detect_board_ros)):
+        times, errors, found, worst = [], [], 0, []
+        found_idx = set()
+        for i, (img, truth) in enumerate(boards):
+            d, dt = _timed(fn, img)
+            times.append(dt)
+            if d.corners is not None:  # found, or found but rejected at the border
+                found += 1
+                found_idx.add(i)
+                e = np.linalg.norm(d.corners - order_corners(truth, renderer.board), axis=1)
+                errors.append(e)
+                worst.append(e.max())
+        etimes, false_pos, per_kind = [], 0, {}
+        for kind, img in empties:
+            d, dt = _timed(fn, img)
+            etimes.append(dt)
+            false_pos += d.corners is not None
+            per_kind.setdefault(kind, []).append(dt * 1e3)
+        e = np.concatenate(errors) if errors else np.zeros(0)
+        out[name] = {
+            "boards_found": found, "boards": len(boards), "found_idx": sorted(found_idx),
+            "false_detections": int(false_pos), "empty_frames": len(empties),
+            "corner_err_median_px": float(np.median(e)) if e.size else None,
+            "corner_err_p95_px": float(np.percentile(e, 95)) if e.size else None,
+            "corner_err_max_px": float(e.max()) if e.size else None,
+            "frames_with_err_over_1px": int(np.sum(np.array(worst) > 1.0)),
+            "board_ms_median": float(np.median(times) * 1e3), "board_ms_p90": float(np.percentile(times, 90) * 1e3),
+            "board_ms_max": float(np.max(times) * 1e3),
+            "empty_ms_median": float(np.median(etimes) * 1e3), "empty_ms_p90": float(np.percentile(etimes, 90) * 1e3),
+            "empty_ms_max": float(np.max(etimes) * 1e3),
+            "empty_ms_median_by_kind": {k: float(np.median(v)) for k, v in per_kind.items()},
+        }
+    ours, ros = set(out["ours"].pop("found_idx")), set(out["ros"].pop("found_idx"))
+    out["found_by_ros_only"] = len(ros - ours)
+    out["found_by_ours_only"] = len(ours - ros)
+    return out
+
+
+SESSION = Path(__file__).resolve().parents[1] / "data" / "session"
+
+
+def part_session(session: Path = SESSION) -> dict | None:
+    """Both detectors on the synthetic Duckiebot recording, scored against its truth file."""
+    bag, truth_file = session / "intrinsics.bag", session / "truth.yaml"
+    if not (bag.exists() and truth_file.exists()):
+        return None
+    import yaml
+
+    from dtscal_lib.sources.bag import BagSource
+
+    truth = {f["index"]: f for f in yaml.safe_load(truth_file.read_text())["intrinsics"]["frames"]}
+    rows = {"ours": [], "ros": []}
+    for frame in BagSource(bag):
+        if frame.image is None:
+            continue
+        t = truth[frame.index]
+        for name, fn in (("ours", detect_board), ("ros", detect_board_ros)):
+            d, dt = _timed(fn, frame.image)
+            err = None
+            if d.corners is not None and t["corners"] is not None:
+                exact = order_corners(np.asarray(t["corners"], dtype=np.float64))
+                err = float(np.linalg.norm(d.corners - exact, axis=1).max())
+            rows[name].append((bool(t["board_visible"]), d.corners is not None, err, dt))
+    out = {}
+    for name, r in rows.items():
+        errs = np.array([x[2] for x in r if x[2] is not None])
+        out[name] = {
+            "frames": len(r), "board_visible": sum(x[0] for x in r),
+            "found_when_visible": sum(1 for x in r if x[0] and x[1]),
+            "detections_without_truth": sum(1 for x in r if x[1] and x[2] is None),
+            "frame_max_err_median_px": float(np.median(errs)) if errs.size else None,
+            "frame_max_err_max_px": float(errs.max()) if errs.size else None,
+            "frames_with_err_over_1px": int(np.sum(errs > 1.0)),
+            "ms_median": float(np.median([x[3] for x in r]) * 1e3),
+            "ms_p90": float(np.percentile([x[3] for x in r], 90) * 1e3),
+            "ms_median_no_board": float(np.median([x[3] for x in r if not x[0]] or [np.nan]) * 1e3),
+        }
+    return out
+
+
+def print_session(s: dict) -> None:
+    o, r = s["ours"], s["ros"]
+    print()
+    print(f"Synthetic session data/session/intrinsics.bag: {o['frames']} frames, board fully visible in "
+          f"{o['board_visible']}")
+    rows = [("found when visible", "found_when_visible", "{:d}"),
+            ("detections without truth", "detections_without_truth", "{:d}"),
+            ("per-frame max error median (px)", "frame_max_err_median_px", "{:.3f}"),
+            ("worst corner error (px)", "frame_max_err_max_px", "{:.2f}"),
+            ("frames with an error > 1 px", "frames_with_err_over_1px", "{:d}"),
+            ("ms median (all frames)", "ms_median", "{:.1f}"),
+            ("ms p90 (all frames)", "ms_p90", "{:.1f}"),
+            ("ms median (no board visible)", "ms_median_no_board", "{:.1f}")]
+    print(f"{'':32s} {'detect_board':>13s} {'ROS call':>10s}")
+    for label, key, fmt in rows:
+        fo = "-" if o[key] is None else fmt.format(o[key])
+        fr = "-" if r[key] is None else fmt.format(r[key])
+        print(f"{label:32s} {fo:>13s} {fr:>10s}")
+
+
+def print_report(timing: dict, quality: dict | None) -> None:
+    print("Corner detection, 640x480, median over runs (baseline: ROS findChessboardCorners "
+          "ADAPTIVE|NORMALIZE|FAST_CHECK, full frame)")
+    print(f"{'frame':26s} {'detect_board':>13s} {'ROS call':>10s} {'ROS/ours':>9s} {'target':>8s}")
+    for name, r in timing.items():
+        mark = "ok" if r["meets_target"] else "MISSED"
+        print(f"{name:26s} {r['ours_ms']:10.1f} ms {r['ros_ms']:7.1f} ms {r['speedup']:8.1f}x "
+              f"<= {TARGET_MS:.0f} ms {mark}")
+    if quality is None:
+        return
+    o, r = quality["ours"], quality["ros"]
+    print()
+    print(f"Rendered set: {o['boards']} board frames (0.25-1.2 m, tilt <= 46 deg, blur, noise, JPEG 50-95), "
+          f"{o['empty_frames']} board-free frames")
+    rows = [
+        ("boards found", "boards_found", "{:d}"),
+        ("false detections (no board)", "false_detections", "{:d}"),
+        ("corner error median (px)", "corner_err_median_px", "{:.3f}"),
+        ("corner error p95 (px)", "corner_err_p95_px", "{:.3f}"),
+        ("corner error max (px)", "corner_err_max_px", "{:.2f}"),
+        ("frames with an error > 1 px", "frames_with_err_over_1px", "{:d}"),
+        ("board frame ms median", "board_ms_median", "{:.1f}"),
+        ("board frame ms p90", "board_ms_p90", "{:.1f}"),
+        ("board frame ms max", "board_ms_max", "{:.1f}"),
+        ("no-board frame ms median", "empty_ms_median", "{:.1f}"),
+        ("no-board frame ms p90", "empty_ms_p90", "{:.1f}"),
+        ("no-board frame ms max", "empty_ms_max", "{:.1f}"),
+    ]
+    print(f"{'':30s} {'detect_board':>13s} {'ROS call':>10s}")
+    for label, key, fmt in rows:
+        fo = "-" if o[key] is None else fmt.format(o[key])
+        fr = "-" if r[key] is None else fmt.format(r[key])
+        print(f"{label:30s} {fo:>13s} {fr:>10s}")
+    print(f"{'no-board ms median by kind':30s}")
+    for k in o["empty_ms_median_by_kind"]:
+        print(f"  {k:28s} {o['empty_ms_median_by_kind'][k]:13.1f} {r['empty_ms_median_by_kind'][k]:10.1f}")
+    print(f"boards found by ROS only: {quality['found_by_ros_only']}, by detect_board only: "
+          f"{quality['found_by_ours_only']}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--json", action="store_true", help="print the numbers as JSON")
+    ap.add_argument("--check", action="store_true", help="exit 1 if the time target is missed")
+    ap.add_argument("--quick", action="store_true", help="timing only, no quality set")
+    ap.add_argument("--repeats", type=int, default=21, help="runs per timing (median)")
+    ap.add_argument("--boards", type=int, default=60, help="board frames in the quality set")
+    ap.add_argument("--empty", type=int, default=20, help="board-free frames in the quality set")
+    args = ap.parse_args(argv)
+
+    renderer = FrameRenderer()
+    timing = part_timing(renderer, args.repeats)
+    quality = None if args.quick else part_quality(renderer, args.boards, args.empty)
+    session = None if args.quick else part_session()
+    if args.json:
+        print(json.dumps({"target_ms": TARGET_MS, "timing": timing, "quality": quality, "session": session},
+                         indent=2))
+    else:
+        print_report(timing, quality)
+        if session is not None:
+            print_session(session)
+    missed = [k for k, v in timing.items() if not v["meets_target"]]
+    if args.check and missed:
+        print(f"target missed for: {', '.join(missed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
