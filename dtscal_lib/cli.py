@@ -117,7 +117,10 @@ def cmd_release(args) -> int:
             return 1
         print("notebooks/ matches solutions/")
         return 0
-    if args.write:
+    if args.execute:
+        for p in release.execute_solutions(root / "solutions"):
+            print(f"executed {p}")
+    if args.write or args.execute:
         for p in release.generate_notebooks(root / "solutions", root / "notebooks"):
             print(p)
         return 0
@@ -185,6 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("out", nargs="?", help="folder to write the student release into")
     sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
     sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/")
+    sp.add_argument("--execute", action="store_true",
+                    help="re-run every solution notebook (storing its outputs), then regenerate notebooks/")
     sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")
     sp.set_defaults(func=cmd_release)
 

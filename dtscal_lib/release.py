@@ -567,3 +567,38 @@ def inject_solutions(student_nb: NotebookNode, solution_nb: NotebookNode) -> Not
             j += 1
         cell.source = "\n".join(out)
     return nb
+
+
+# --------------------------------------------------------------------------- maintaining solutions
+def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, timeout: int = 300) -> list[Path]:
+    """Run solution notebooks top to bottom and store their outputs (what nbval compares).
+
+    Each notebook runs in its own folder, as JupyterLab and nbval run it. Per-cell execution
+    timestamps are dropped so that re-running an unchanged notebook leaves the file unchanged
+    wherever the outputs are deterministic.
+
+    Parameters
+    ----------
+    solutions_dir : folder of solution notebooks
+    names : optional file names (``02_homography.ipynb``) to run; default all
+    """
+    from nbclient import NotebookClient
+
+    paths = _solution_paths(Path(solutions_dir))
+    if names:
+        wanted = set(names)
+        unknown = wanted - {p.name for p in paths}
+        if unknown:
+            raise DtscalError(f"no solution notebook named {', '.join(sorted(unknown))} in {solutions_dir}")
+        paths = [p for p in paths if p.name in wanted]
+    for path in paths:
+        nb = _read(path)
+        try:
+            NotebookClient(nb, timeout=timeout, kernel_name="python3",
+                           resources={"metadata": {"path": str(path.parent)}}).execute()
+        except Exception as exc:
+            raise DtscalError(f"{path.name} failed while executing; fix the notebook and run again: {exc}") from exc
+        for cell in nb.cells:
+            cell.metadata.pop("execution", None)
+        path.write_text(_writes(nb))
+    return paths
