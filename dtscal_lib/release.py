@@ -593,8 +593,9 @@ def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, time
         paths = [p for p in paths if p.name in wanted]
     for path in paths:
         nb = _read(path)
+        nb.metadata.pop("widgets", None)  # widget state is rebuilt when the notebook is opened
         try:
-            NotebookClient(nb, timeout=timeout, kernel_name="python3",
+            NotebookClient(nb, timeout=timeout, kernel_name="python3", store_widget_state=False,
                            resources={"metadata": {"path": str(path.parent)}}).execute()
         except Exception as exc:
             raise DtscalError(f"{path.name} failed while executing; fix the notebook and run again: {exc}") from exc
