@@ -141,6 +141,8 @@ def cmd_course(args) -> int:
         cmd.append("--no-browser")
     if args.ip:
         cmd.append(f"--ip={args.ip}")
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        cmd.append("--allow-root")  # containers and course VMs often run as root
     notebook = root / "notebooks" / "01_pinhole_projection.ipynb"
     if notebook.exists():
         cmd.append(str(notebook))

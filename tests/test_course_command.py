@@ -7,6 +7,7 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -43,15 +44,34 @@ def test_course_serves_notebooks(tmp_path):
                 token = line.split("token=")[1].split()[0].strip()
         assert token, "JupyterLab did not start:\n" + "".join(lines[-30:])
         url = f"http://127.0.0.1:{port}/api/contents/notebooks?token={token}"
-        with urllib.request.urlopen(url, timeout=30) as r:
-            listing = json.load(r)
+        listing = json.loads(_get(url))
         names = {item["name"] for item in listing["content"]}
         assert "01_pinhole_projection.ipynb" in names
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/lab?token={token}", timeout=30) as r:
             assert r.status == 200 and b"JupyterLab" in r.read()
     finally:
-        os.killpg(proc.pid, signal.SIGTERM)
+        _stop(proc)
+
+
+def _get(url: str, patience: float = 30.0) -> bytes:
+    """GET with retries while the server finishes binding its socket."""
+    deadline = time.time() + patience
+    while True:
         try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
+            with urllib.request.urlopen(url, timeout=30) as r:
+                return r.read()
+        except urllib.error.URLError as exc:
+            if not isinstance(exc.reason, ConnectionRefusedError) or time.time() > deadline:
+                raise
+            time.sleep(0.2)
+
+
+def _stop(proc):
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=20)
+    except ProcessLookupError:
+        pass  # already gone
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=20)
