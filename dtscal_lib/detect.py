@@ -551,6 +551,27 @@ def detect_board_ros(image, board: Board = DUCKIETOWN_BOARD, *,
     return _finish(gray, raw.reshape(-1, 2).astype(np.float64), board, border_margin)
 
 
+def detect_board_still(image, board: Board = DUCKIETOWN_BOARD, *,
+                       border_margin: float = BORDER_MARGIN_PX) -> Detection:
+    """Thorough detection for a single still frame, where time does not matter.
+
+    :func:`detect_board` first; when it finds nothing, OpenCV's classic detector on the
+    whole frame with ``ADAPTIVE_THRESH | NORMALIZE_IMAGE`` and no ``FAST_CHECK``, as
+    Duckietown's extrinsic calibration runs it. On a rectified floor view the far squares
+    are only about 12 px tall; ``FAST_CHECK`` and the region search can miss such a board
+    that the full search finds. Too slow for a live stream on a board-free frame (up to a
+    few hundred ms); meant for the extrinsic capture and for notebooks.
+    """
+    det = detect_board(image, board, border_margin=border_margin)
+    if det.found or det.reason == REASON_AT_BORDER:
+        return det
+    gray = to_gray(image)
+    ok, raw = cv2.findChessboardCorners(gray, board.pattern_size, flags=REGION_FLAGS)
+    if not ok:
+        return det
+    return _finish(gray, raw.reshape(-1, 2).astype(np.float64), board, border_margin)
+
+
 # --------------------------------------------------------------------------- drawing
 def draw_detection(image, detection: Detection) -> np.ndarray:
     """A BGR copy of ``image`` with the detection drawn like ``cv2.drawChessboardCorners``.

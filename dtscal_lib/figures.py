@@ -143,40 +143,17 @@ def _datasets():
 
 
 def find_corners(image: np.ndarray, board: Board = DUCKIETOWN_BOARD, thorough: bool = True) -> np.ndarray | None:
-    """Inner corners of ``board`` in an image, (N, 2) float64 pixels in OpenCV's order, or None.
+    """Inner corners of ``board`` in an image, (N, 2) float64 pixels, or None.
 
-    Tries the kit's fast detector (:mod:`dtscal_lib.detect`, ROS's rules) first; with
-    ``thorough``, then OpenCV's ``findChessboardCorners`` on the whole image +
-    ``cornerSubPix`` (slow when there is no board, but it also finds boards the fast
-    detector's region search misses, e.g. on a textured floor).
+    The kit's fast detector (:func:`dtscal_lib.detect.detect_board`, ROS's rules); with
+    ``thorough``, the still-frame detector that also runs OpenCV's full search
+    (:func:`dtscal_lib.detect.detect_board_still`: slower when there is no board, but it
+    finds boards the fast region search misses, e.g. a far board on a textured floor).
     """
-    try:
-        from .detect import detect_board
-    except ImportError:
-        detect_board = None
-    if detect_board is not None:
-        det = detect_board(image, board)
-        if det.found:
-            return np.asarray(det.corners, dtype=np.float64).reshape(-1, 2)
-        if not thorough:
-            return None
-    gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-    found, c = cv2.findChessboardCorners(gray, board.pattern_size, flags=flags)
-    if not found:
-        return None
-    c = c.reshape(-1, 2)
-    h, w = gray.shape
-    m = dt.BORDER_MARGIN_PX
-    if np.any((c[:, 0] < m) | (c[:, 0] > w - 1 - m) | (c[:, 1] < m) | (c[:, 1] > h - 1 - m)):
-        return None  # ROS's rule: a board touching the border is not trusted
-    grid = c.reshape(board.rows, board.cols, 2)
-    spacing = min(float(np.linalg.norm(np.diff(grid, axis=1), axis=-1).min()),
-                  float(np.linalg.norm(np.diff(grid, axis=0), axis=-1).min()))
-    r = int(max(2, min(11, spacing // 2 - 1)))  # the window must not reach the next corner
-    c = cv2.cornerSubPix(gray, c.reshape(-1, 1, 2).astype(np.float32), (r, r), (-1, -1),
-                         (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3))
-    return c.reshape(-1, 2).astype(np.float64)
+    from .detect import detect_board, detect_board_still
+
+    det = (detect_board_still if thorough else detect_board)(image, board)
+    return np.asarray(det.corners, dtype=np.float64).reshape(-1, 2) if det.found else None
 
 
 def board_homographies(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray]) -> list[np.ndarray]:

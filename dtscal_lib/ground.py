@@ -35,6 +35,7 @@ from . import duckietown as dt
 from .boards import DUCKIETOWN_BOARD, GROUND_NEAR_ROW_X, Board, ground_points, order_for_ground
 from .camera import CameraModel, rectify_image
 from .errors import CalibrationError, DtscalError
+from .detect import detect_board_still
 
 #: default RANSAC inlier threshold, metres on the ground (Duckietown passes OpenCV's
 #: default of 3, which in metres rejects nothing; 1 cm rejects a mis-detected corner)
@@ -231,15 +232,6 @@ def _check_image(image) -> np.ndarray:
     return image
 
 
-def _gray(image: np.ndarray) -> np.ndarray:
-    if image.ndim == 2:
-        return image
-    if image.shape[2] == 1:
-        return image[:, :, 0]
-    code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
-    return cv2.cvtColor(image, code)
-
-
 def resize_to_width(image: np.ndarray, width: int = dt.IMAGE_SIZE[0]) -> np.ndarray:
     """Resize to ``width`` keeping the aspect ratio (Duckietown resizes to 640 wide); no-op if already."""
     h, w = image.shape[:2]
@@ -250,52 +242,15 @@ def resize_to_width(image: np.ndarray, width: int = dt.IMAGE_SIZE[0]) -> np.ndar
     return cv2.resize(image, (int(width), new_h), interpolation=interp)
 
 
-def _classic_corners(gray: np.ndarray, board: Board) -> tuple[np.ndarray | None, str]:
-    """Duckietown's extrinsic detector: ``findChessboardCorners(ADAPTIVE_THRESH | NORMALIZE_IMAGE)``
-    (no ``FAST_CHECK``) on the whole rectified frame, ROS's 8 px border rule, ``cornerSubPix``
-    with a window of half the smallest corner spacing."""
-    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-    ok, corners = cv2.findChessboardCorners(gray, board.pattern_size, flags=flags)
-    if not ok or corners is None:
-        return None, "no_board"
-    c = corners.reshape(-1, 2).astype(np.float64)
-    grid = c.reshape(board.rows, board.cols, 2)
-    spacing = min(np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
-                  np.linalg.norm(np.diff(grid, axis=0), axis=2).min())
-    r = int(max(2, np.ceil(spacing / 2)))
-    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 60, 1e-3)
-    refined = cv2.cornerSubPix(gray, c.reshape(-1, 1, 2).astype(np.float32), (r, r), (-1, -1), criteria)
-    c = refined.reshape(-1, 2).astype(np.float64)
-    h, w = gray.shape
-    m = dt.BORDER_MARGIN_PX
-    inside = (c[:, 0] > m) & (c[:, 0] < w - m) & (c[:, 1] > m) & (c[:, 1] < h - m)
-    return (c, "found") if inside.all() else (c, "at_border")
-
-
 def _find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, str]:
     """Corners of the board in the rectified frame: ``(corners (N, 2) or None, reason)``.
 
-    ``reason`` is ``"found"``, ``"no_board"`` or ``"at_border"``. Uses
-    :func:`dtscal_lib.detect.detect_board` (the live detector) when that module exists;
-    when it finds nothing, falls back to the classic full-frame detector without
-    ``FAST_CHECK``, as Duckietown's extrinsic calibration runs it: on the rectified
-    image (smaller focal length than the raw one) the far squares of the board are only
-    about 12 px tall and ``FAST_CHECK`` can reject a board that is there. One still
-    frame, so the slower search costs nothing that matters.
+    ``reason`` is ``"found"``, ``"no_board"`` or ``"at_border"``. One still frame, so the
+    thorough detector (:func:`dtscal_lib.detect.detect_board_still`) is affordable: on the
+    rectified floor view the far squares are only about 12 px tall.
     """
-    try:
-        from .detect import detect_board
-    except ModuleNotFoundError as e:  # the detection module is optional here
-        if e.name != f"{__package__}.detect":
-            raise
-        detect_board = None
-    if detect_board is not None:
-        det = detect_board(image, board, border_margin=dt.BORDER_MARGIN_PX)
-        if det.found:
-            return np.asarray(det.corners, dtype=np.float64).reshape(-1, 2), "found"
-        if det.reason == "at_border":
-            return det.corners, "at_border"
-    return _classic_corners(_gray(image), board)
+    det = detect_board_still(image, board, border_margin=dt.BORDER_MARGIN_PX)
+    return det.corners, "found" if det.found else det.reason
 
 
 def calibrate_extrinsics(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,

@@ -334,3 +334,16 @@ def test_synthetic_session_recording():
     # the extrinsic recording: the board lies on the floor in front of the robot
     ext = [detect_board(frame.image) for frame in BagSource(SESSION / "extrinsics.bag") if frame.image is not None]
     assert ext and all(d.found for d in ext)
+
+
+def test_detect_board_still_finds_the_rectified_extrinsic_capture_and_nothing_in_clutter():
+    from dtscal_lib import datasets, synth
+    from dtscal_lib.camera import rectify_image
+    from dtscal_lib.detect import detect_board_still
+
+    cam = synth.synthetic_camera()
+    rect = rectify_image(datasets.extrinsic_frames()[0], cam.rectification_maps())
+    det = detect_board_still(rect)
+    assert det.found and det.corners.shape == (35, 2)
+    blank = np.full((480, 640), 127, np.uint8)
+    assert detect_board_still(blank).reason == "no_board"
