@@ -715,40 +715,22 @@ def notebook_function(nb_name: str, func: str, nb_dir=None) -> Callable | None:
     """A student's exercise function from another notebook of the same folder, or None.
 
     Runs that notebook's cell tagged ``imports`` and its cells tagged ``exercise`` in a
-    fresh namespace (the rest of the notebook is not run), as
-    :func:`dtscal_lib.release.solution_functions` does, but also on a student notebook,
-    whose exercise cells hold the student's code or the ``NotImplementedError`` stub instead
-    of a solution region. ``nb_dir`` defaults to the current folder (where Jupyter runs the
+    fresh namespace (the rest of the notebook is not run), with
+    :func:`dtscal_lib.release.notebook_functions`: the student's code or the
+    ``NotImplementedError`` stub. ``nb_dir`` defaults to the current folder (where Jupyter runs the
     notebook). Prints why and returns None when the function cannot be loaded.
     """
-    import nbformat
+    from .release import notebook_functions
 
     path = Path.cwd() / nb_name if nb_dir is None else Path(nb_dir) / nb_name
     if not path.exists():
         print(f"{path.name} is not in {path.parent}; cannot load your `{func}` from it")
         return None
     try:
-        nb = nbformat.read(str(path), as_version=4)
-    except Exception as exc:
-        print(f"could not read {path.name}: {exc}")
+        return notebook_functions(path, [func])[func]
+    except DtscalError as exc:
+        print(f"could not load your `{func}` from {path.name}: {exc}")
         return None
-
-    def tagged(tag):
-        return [c for c in nb.cells if c.cell_type == "code" and tag in c.get("metadata", {}).get("tags", [])]
-
-    ns: dict = {"__name__": "dtscal_notebook_" + path.stem.replace("-", "_")}
-    for cell in tagged("imports") + tagged("exercise"):
-        src = "\n".join(("# " + l) if l.lstrip().startswith(("%", "!")) else l for l in cell.source.splitlines())
-        try:
-            exec(compile(src, f"<{path.name}>", "exec"), ns)
-        except Exception as exc:
-            print(f"could not run the cells of {path.name} that define `{func}`: {type(exc).__name__}: {exc}")
-            return None
-    fn = ns.get(func)
-    if not callable(fn):
-        print(f"{path.name} defines no function `{func}` in its exercise cells")
-        return None
-    return fn
 
 
 def ground_error_mm(H: np.ndarray, H_true: np.ndarray, pixels: np.ndarray) -> np.ndarray:

@@ -476,14 +476,24 @@ def _defined_functions(source: str) -> list[str]:
 
 
 def solution_functions(nb_path, names: Iterable[str] | None = None) -> dict[str, Callable]:
-    """The exercise functions of a solutions notebook, ready to call.
+    """The exercise functions of a solutions notebook (markers checked), ready to call.
+
+    See :func:`notebook_functions`; this one also insists that every exercise cell holds a
+    well-formed solution region.
+    """
+    return notebook_functions(nb_path, names, solutions=True)
+
+
+def notebook_functions(nb_path, names: Iterable[str] | None = None, *,
+                       solutions: bool = False) -> dict[str, Callable]:
+    """The exercise functions of a course notebook (solution or student version), ready to call.
 
     Runs the cell tagged ``imports`` and every cell tagged ``exercise`` (in order) in a
     fresh namespace; the rest of the notebook is not run.
 
     Parameters
     ----------
-    nb_path : path of a notebook in ``solutions/``
+    nb_path : path of a notebook in ``solutions/`` or ``notebooks/``
     names : optional, the functions wanted (default: every function the exercise cells define)
 
     Returns
@@ -498,7 +508,8 @@ def solution_functions(nb_path, names: Iterable[str] | None = None) -> dict[str,
     """
     nb_path = Path(nb_path)
     nb = _read(nb_path)
-    _validate_cells(nb, nb_path.name)
+    if solutions:
+        _validate_cells(nb, nb_path.name)
     imports = [c for c in nb.cells if c.cell_type == "code" and IMPORTS_TAG in _tags(c)]
     exercises = [c for c in nb.cells if c.cell_type == "code" and EXERCISE_TAG in _tags(c)]
     if not imports or not exercises:
