@@ -206,6 +206,29 @@ SUBSCRIBER = textwrap.dedent('''
 ''')
 
 
+def _play_to_subscriber(env, bag, topic: str, n: int, tmp_path: Path) -> list[dict]:
+    """``rosbag play`` a bag to a rospy subscriber on a real master; what the subscriber got."""
+    script = tmp_path / "sub.py"
+    script.write_text(SUBSCRIBER)
+    received = tmp_path / "received.json"
+    sub_log = tmp_path / "sub.log"
+    with _started([SYSTEM_PYTHON, str(script), topic, str(n), str(received), "90"], env, sub_log) as sub:
+        deadline = time.time() + 60
+        while "READY" not in _log(sub_log):
+            assert sub.poll() is None, f"subscriber died:\n{_log(sub_log)}"
+            assert time.time() < deadline, f"subscriber not ready:\n{_log(sub_log)}"
+            time.sleep(0.1)
+        play = _run([_ros_tool("rosbag"), "play", "--quiet", "--wait-for-subscribers", "-d", "1", str(bag)], env)
+        assert play.returncode == 0, play.stdout + play.stderr
+        try:
+            sub.wait(timeout=90)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"subscriber did not finish:\n{_log(sub_log)}")
+    got = json.loads(received.read_text())
+    assert len(got) == n, _log(sub_log)
+    return got
+
+
 def test_rosbag_info_and_play_accept_our_bag(roscore, tmp_path):
     import hashlib
 
@@ -223,24 +246,7 @@ def test_rosbag_info_and_play_accept_our_bag(roscore, tmp_path):
     human = _run([_ros_tool("rosbag"), "info", str(bag)], env)
     assert human.returncode == 0 and "10 msgs" in human.stdout
 
-    script = tmp_path / "sub.py"
-    script.write_text(SUBSCRIBER)
-    received = tmp_path / "received.json"
-    sub_log = tmp_path / "sub.log"
-    with _started([SYSTEM_PYTHON, str(script), TOPIC, "10", str(received), "90"], env, sub_log) as sub:
-        deadline = time.time() + 60
-        while "READY" not in _log(sub_log):
-            assert sub.poll() is None, f"subscriber died:\n{_log(sub_log)}"
-            assert time.time() < deadline, f"subscriber not ready:\n{_log(sub_log)}"
-            time.sleep(0.1)
-        play = _run([_ros_tool("rosbag"), "play", "--quiet", "--wait-for-subscribers", "-d", "1", str(bag)], env)
-        assert play.returncode == 0, play.stdout + play.stderr
-        try:
-            sub.wait(timeout=90)
-        except subprocess.TimeoutExpired:
-            pytest.fail(f"subscriber did not finish:\n{_log(sub_log)}")
-    got = json.loads(received.read_text())
-    assert len(got) == 10, _log(sub_log)
+    got = _play_to_subscriber(env, bag, TOPIC, 10, tmp_path)
     for g, b, t in zip(got, jpegs, stamps):
         assert g["format"] == "jpeg"
         assert g["type"] == "sensor_msgs/CompressedImage" and g["md5"] == "8f7a12909da2c9d3332d540a0977563f"
@@ -389,20 +395,6 @@ def test_shipped_session_plays_with_ros(roscore, tmp_path):
         assert info.returncode == 0, info.stderr
         meta = yaml.safe_load(info.stdout)
         assert meta["messages"] == n and meta["topics"][0]["topic"] == topic
-    script = tmp_path / "sub.py"
-    script.write_text(SUBSCRIBER)
-    received = tmp_path / "received.json"
-    sub_log = tmp_path / "sub.log"
-    with _started([SYSTEM_PYTHON, str(script), topic, "5", str(received), "90"], env, sub_log) as sub:
-        deadline = time.time() + 60
-        while "READY" not in _log(sub_log):
-            assert sub.poll() is None, f"subscriber died:\n{_log(sub_log)}"
-            assert time.time() < deadline, f"subscriber not ready:\n{_log(sub_log)}"
-            time.sleep(0.1)
-        play = _run([_ros_tool("rosbag"), "play", "--quiet", "--wait-for-subscribers", "-d", "1",
-                     str(datasets.session_dir() / "extrinsics.bag")], env)
-        assert play.returncode == 0, play.stdout + play.stderr
-        sub.wait(timeout=90)
-    got = json.loads(received.read_text())
+    got = _play_to_subscriber(env, datasets.session_dir() / "extrinsics.bag", topic, 5, tmp_path)
     expected = [d for _, _, d in datasets.read_bag_jpegs(datasets.session_dir() / "extrinsics.bag")]
     assert [g["sha256"] for g in got] == [__import__("hashlib").sha256(d).hexdigest() for d in expected]
