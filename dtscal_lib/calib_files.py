@@ -75,7 +75,8 @@ _MAX_ASPECT = 5.0        # max(fx/fy, fy/fx)
 
 
 # --------------------------------------------------------------------------- paths
-def _check_robot(robot: str) -> str:
+def check_robot_name(robot: str) -> str:
+    """Validate a robot name for writing its calibration; returns it (``default`` is refused)."""
     if not isinstance(robot, str) or not robot:
         raise CalibrationFileError(f"robot name must be a non-empty string, got {robot!r}; pass --robot NAME")
     if robot == dt.DEFAULT_NAME:
@@ -93,7 +94,7 @@ def _check_robot(robot: str) -> str:
 def _file_name(robot: str) -> str:
     if robot == dt.DEFAULT_NAME:
         return f"{robot}.yaml"
-    return f"{_check_robot(robot)}.yaml"
+    return f"{check_robot_name(robot)}.yaml"
 
 
 def intrinsic_path(out_dir, robot: str) -> Path:
@@ -521,7 +522,7 @@ def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str) -> Path:
 
     Refuses ``robot == "default"``: the factory file is never overwritten.
     """
-    _check_robot(robot)
+    check_robot_name(robot)
     if not isinstance(calib, IntrinsicCalibration):
         raise CalibrationFileError(f"save_intrinsics needs an IntrinsicCalibration, got {type(calib).__name__}")
     return _write(intrinsic_path(out_dir, robot), calib.to_dict())
@@ -533,7 +534,7 @@ def save_extrinsics(H, out_dir, robot: str) -> Path:
     ``H`` (3, 3) maps rectified pixels to ground metres; it is validated (finite,
     non-singular, not corrupt) before anything is written. Refuses ``robot == "default"``.
     """
-    _check_robot(robot)
+    check_robot_name(robot)
     path = extrinsic_path(out_dir, robot)
     H = validate_homography(H, f"{path} (not written)")
     return _write(path, {"homography": [_plain(v) for v in H.ravel()]})

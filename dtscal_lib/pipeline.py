@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
 
+import cv2
 import numpy as np
 
 from . import calib_files
@@ -112,11 +113,12 @@ def robot_from_topic(topic: str | None) -> str | None:
 
 
 def _robot_name(robot: str | None, source) -> str:
+    """The robot whose file is written, checked before any work is done."""
     if robot:
-        return robot
+        return calib_files.check_robot_name(robot)
     guess = robot_from_topic(getattr(source, "topic", None))
     if guess:
-        return guess
+        return calib_files.check_robot_name(guess)
     raise DtscalError(
         "cannot tell which robot this is from the source; pass --robot NAME "
         "(the calibration is written as camera_intrinsic/NAME.yaml)"
@@ -178,6 +180,9 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
             det = detect_board(img, board)
         except DtscalError as exc:  # a frame the detector cannot take: count it, go on
             tally.reject(getattr(exc, "reason", "bad_frame"))
+            continue
+        except cv2.error:  # OpenCV choking on one odd frame must not end the run
+            tally.reject("detector_error")
             continue
         if not det.found:
             tally.reject(det.reason or "no_board")
