@@ -38,8 +38,8 @@ def _progress(enabled: bool, desc: str):
             total = len(src)
         except TypeError:
             total = None
-        return tqdm(src, total=total, desc=desc, unit="frame", file=sys.stderr, leave=False,
-                    disable=None)  # disable=None: no bar when stderr is not a terminal
+        # on stderr, so that --json output on stdout stays one clean object; -q turns it off
+        return tqdm(src, total=total, desc=desc, unit="frame", file=sys.stderr, leave=False, mininterval=0.5)
 
     return wrap
 
@@ -213,6 +213,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("dtscal: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `dtscal ... --json | head`: the reader left; not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
