@@ -88,6 +88,7 @@ def test_cli_json_is_one_object_on_stdout(tmp_path):
     p = _dtscal("calibrate-intrinsics", "--source", INTRINSIC_BAG, "--out", tmp_path, "--json")
     assert p.returncode == 0, p.stderr
     data = json.loads(p.stdout)
+    assert "frame" in p.stderr and "%" in p.stderr  # the progress bar goes to stderr
     for key in ("K", "dist", "rms", "per_view_rms", "std", "samples_used", "frames"):
         assert key in data
     assert data["samples_used"] == len(data["per_view_rms"])
