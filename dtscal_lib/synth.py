@@ -566,6 +566,31 @@ def room_background(seed: int = DEFAULT_SEED, size: tuple[int, int] = dt.IMAGE_S
     return cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA).astype(np.float32)
 
 
+def scene_through_lens(renderer: Renderer, seed: int = DEFAULT_SEED) -> np.ndarray:
+    """The room, seen through the camera's lens: (H, W, 3) float32 radiance.
+
+    :func:`room_background` draws the room as a pinhole picture: its straight edges are
+    straight on that canvas. Here the canvas is spread over the camera's whole field of view
+    in *undistorted* normalized coordinates, and every sub-pixel samples it along its ray.
+    So the room is bent by the lens like the board is, and rectifying a recorded frame
+    straightens the window frames and the table edge as it straightens the board.
+    """
+    cam = renderer.camera
+    w, h = cam.size
+    s = renderer.supersample
+    x, y = renderer.rays[..., 0], renderer.rays[..., 1]
+    # the canvas covers the field of view with a small margin; 1.25x the image for detail
+    cw, ch = int(round(1.25 * w)), int(round(1.25 * h))
+    canvas = room_background(seed, (cw, ch))
+    x0, x1 = float(x.min()), float(x.max())
+    y0, y1 = float(y.min()), float(y.max())
+    pad_x, pad_y = 0.02 * (x1 - x0), 0.02 * (y1 - y0)
+    map_x = ((x - x0 + pad_x) / (x1 - x0 + 2 * pad_x) * (cw - 1)).astype(np.float32)
+    map_y = ((y - y0 + pad_y) / (y1 - y0 + 2 * pad_y) * (ch - 1)).astype(np.float32)
+    sub = cv2.remap(canvas, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    return _downsample(np.ascontiguousarray(sub), s).astype(np.float32)
+
+
 # --------------------------------------------------------------------------- the hand-held sweep
 #: key poses of the hand-held sweep: (frames from the previous key, frames held,
 #: board-centre pixel u, v, distance z [m], pitch, yaw, roll [deg]); None = no board in view.
@@ -732,7 +757,7 @@ def intrinsic_session(seed: int = DEFAULT_SEED, *, frames: Iterable[int] | None 
     renderer = make_renderer(camera) if renderer is None else renderer
     n, segments = _sweep_frames()
     plan = _SweepPlan(n, segments)
-    background = room_background(seed, camera.size)
+    background = scene_through_lens(renderer, seed)
     tremor = _tremor(seed)
     fps = dt.FPS
     idx = range(n) if frames is None else sorted(set(int(i) for i in frames))
@@ -870,7 +895,7 @@ def extrinsic_capture(seed: int = DEFAULT_SEED, *, n_frames: int = 5, mount: Rob
         raise DtscalError("the extrinsic board placement is not fully visible with this camera mount")
 
     # static scene: floor (with the sheet lying on it) over the room background
-    background = room_background(seed, camera.size)
+    background = scene_through_lens(renderer, seed)
     floor = _floor_texture(seed)
     s = board.square
     cx, cy = (board.cols - 1) * s / 2, (board.rows - 1) * s / 2
