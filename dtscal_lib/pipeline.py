@@ -79,13 +79,13 @@ class FrameTally:
         return {"total": self.total, "used": self.used, "rejected": dict(sorted(self.rejected.items()))}
 
 
-def usable_images(frames: Iterable[Frame], tally: FrameTally, expected_size=None):
+def usable_images(frames: Iterable[Frame], tally: FrameTally):
     """Yield ``(frame, image)`` for frames that decode to an image of a consistent size.
 
-    The first good frame fixes the size unless ``expected_size`` (w, h) is given; frames of
-    another size are counted as ``size_mismatch``; undecodable frames under their own reason.
+    The first good frame fixes the size; frames of another size are counted as
+    ``size_mismatch``, undecodable frames under their own reason.
     """
-    size = tuple(expected_size) if expected_size is not None else None
+    size = None
     for frame in frames:
         tally.total += 1
         if frame.error is not None or frame.image is None:
