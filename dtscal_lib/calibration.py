@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .camera import CameraModel, as_K, project_points
+from .camera import CameraModel, as_K, as_size, project_points
 from .errors import CalibrationError, DtscalError
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
@@ -148,12 +148,7 @@ def _check_views(object_points, image_points, image_size):
     img : list of (N_i, 2) float64 pixels
     size : (width, height)
     """
-    try:
-        w, h = (int(s) for s in image_size)
-    except Exception:
-        raise CalibrationError(f"image_size must be (width, height), e.g. (640, 480); got {image_size!r}") from None
-    if w <= 0 or h <= 0:
-        raise CalibrationError(f"image_size must be positive (width, height), got {image_size!r}")
+    w, h = as_size(image_size, name="image_size", error=CalibrationError)
     if isinstance(object_points, np.ndarray) and object_points.ndim == 2:
         raise CalibrationError(
             "object_points must be a sequence of views (one (N, 3) array per view), got a single "

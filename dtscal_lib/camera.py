@@ -280,18 +280,19 @@ def new_camera_matrix(K, dist, size, alpha: float = 0.0) -> np.ndarray:
     ``alpha = 1`` keeps every source pixel (black corners). OpenCV ignores the skew of K here.
     """
     K = as_K(K)
-    w, h = _as_size(size)
+    w, h = as_size(size)
     newK, _ = cv2.getOptimalNewCameraMatrix(K, as_dist(dist), (w, h), float(alpha), (w, h))
     return np.asarray(newK, dtype=np.float64)
 
 
-def _as_size(size) -> tuple[int, int]:
+def as_size(size, *, name: str = "size", error: type[DtscalError] = DtscalError) -> tuple[int, int]:
+    """Validate an image size ``(width, height)`` of positive integers; raise ``error`` if not."""
     try:
         w, h = (int(s) for s in size)
     except Exception:
-        raise DtscalError(f"size must be (width, height), got {size!r}") from None
+        raise error(f"{name} must be (width, height), e.g. (640, 480); got {size!r}") from None
     if w <= 0 or h <= 0:
-        raise DtscalError(f"size must be positive (width, height), got {size!r}")
+        raise error(f"{name} must be positive (width, height), got {size!r}")
     return w, h
 
 
@@ -310,7 +311,7 @@ def rectification_maps(K, dist, new_K, size, R=None, *, dtype=np.float32):
     """
     K = as_K(K)
     new_K = as_K(np.asarray(new_K, dtype=np.float64)[:3, :3])
-    w, h = _as_size(size)
+    w, h = as_size(size)
     rows, cols = np.indices((h, w), dtype=np.float64)
     pix = np.stack([cols.ravel(), rows.ravel(), np.ones(rows.size)], axis=1)
     M = new_K if R is None else new_K @ as_rotation(R)
@@ -363,7 +364,7 @@ class CameraModel:
     def __post_init__(self):
         object.__setattr__(self, "K", as_K(self.K).copy())
         object.__setattr__(self, "dist", as_dist(self.dist))
-        object.__setattr__(self, "size", _as_size(self.size))
+        object.__setattr__(self, "size", as_size(self.size))
         if self.model not in DIST_MODELS:
             raise DtscalError(f"distortion model must be one of {DIST_MODELS}, got {self.model!r}")
         if self.P is None:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .boards import DUCKIETOWN_BOARD, Board
+from .camera import as_size
 from .duckietown import IMAGE_SIZE, MAX_SAMPLES_FOR_CALIBRATE, PARAM_RANGES, SAMPLE_MIN_DISTANCE
 from .errors import DtscalError
 
@@ -33,16 +34,6 @@ PARAM_NAMES = ("X", "Y", "Size", "Skew")
 
 
 # --------------------------------------------------------------------------- pure functions
-def _as_size(image_size) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in image_size)
-    except Exception:
-        raise DtscalError(f"image_size must be (width, height), got {image_size!r}") from None
-    if w <= 0 or h <= 0:
-        raise DtscalError(f"image_size must be positive (width, height), got {image_size!r}")
-    return w, h
-
-
 def _as_corners(corners, board: Board) -> np.ndarray:
     c = np.asarray(corners, dtype=np.float64)
     if c.ndim == 3 and c.shape[1] == 1:  # OpenCV's (N, 1, 2)
@@ -114,7 +105,7 @@ def board_params(corners, board: Board = DUCKIETOWN_BOARD, image_size=IMAGE_SIZE
     >>> board_params(c, b, (640, 480)).round(3).tolist()
     [0.5, 0.5, 0.072, 0.0]
     """
-    w, h = _as_size(image_size)
+    w, h = as_size(image_size, name="image_size")
     c = _as_corners(corners, board)
     quad = c[list(board.outer_corner_indices())]
     area = quad_area(quad)
@@ -183,7 +174,7 @@ class CoverageTracker:
         if not isinstance(board, Board):
             raise DtscalError(f"board must be a Board, got {type(board).__name__}")
         self.board = board
-        self.image_size = _as_size(image_size)
+        self.image_size = as_size(image_size, name="image_size")
         if not (np.isfinite(min_distance) and min_distance >= 0):
             raise DtscalError(f"min_distance must be a non-negative number, got {min_distance!r}")
         ranges = np.asarray(param_ranges, dtype=np.float64).ravel()

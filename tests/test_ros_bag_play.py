@@ -179,6 +179,16 @@ def _frames(n: int) -> list[bytes]:
     return out
 
 
+def _jpeg_files(jpegs: list[bytes], folder: Path) -> list[str]:
+    """Write JPEG bytes as f0.jpg, f1.jpg, ... in ``folder``; their paths, for the ROS-side scripts."""
+    files = []
+    for i, b in enumerate(jpegs):
+        p = folder / f"f{i}.jpg"
+        p.write_bytes(b)
+        files.append(str(p))
+    return files
+
+
 SUBSCRIBER = textwrap.dedent('''
     """Subscribe to a CompressedImage topic, record what arrives, write it as JSON."""
     import hashlib, json, sys, time
@@ -277,11 +287,7 @@ ROS_WRITER = textwrap.dedent('''
 @pytest.mark.parametrize("compression", ["none", "bz2", "lz4"])
 def test_bag_written_by_ros_is_read(ros_ok, tmp_path, compression):
     jpegs = _frames(8)
-    files = []
-    for i, b in enumerate(jpegs):
-        p = tmp_path / f"f{i}.jpg"
-        p.write_bytes(b)
-        files.append(str(p))
+    files = _jpeg_files(jpegs, tmp_path)
     script = tmp_path / "writer.py"
     script.write_text(ROS_WRITER)
     bag = tmp_path / f"ros_{compression}.bag"
@@ -334,11 +340,7 @@ PUBLISHER = textwrap.dedent('''
 def test_rosbag_record_output_is_read(roscore, tmp_path):
     env = roscore
     jpegs = _frames(6)
-    files = []
-    for i, b in enumerate(jpegs):
-        p = tmp_path / f"f{i}.jpg"
-        p.write_bytes(b)
-        files.append(str(p))
+    files = _jpeg_files(jpegs, tmp_path)
     pub_script = tmp_path / "pub.py"
     pub_script.write_text(PUBLISHER)
 
