@@ -527,7 +527,7 @@ def distorted_board_frame() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def grid_image(size=dt.IMAGE_SIZE, spacing: int = 40, thickness: int = 2) -> np.ndarray:
     """A (height, width) uint8 image of straight black lines on white: what a pinhole camera sees."""
-    w, h = cam._as_size(size)
+    w, h = cam.as_size(size)
     img = np.full((h, w), 255, np.uint8)
     for x in range(spacing // 2, w, spacing):
         cv2.line(img, (x, 0), (x, h - 1), 0, thickness)
@@ -576,7 +576,7 @@ def plot_distortion_field(distort: Callable, K, dist, size=dt.IMAGE_SIZE, step: 
     """
     import matplotlib.pyplot as plt
 
-    w, h = cam._as_size(size)
+    w, h = cam.as_size(size)
     u, v = np.meshgrid(np.arange(step / 2, w, step), np.arange(step / 2, h, step))
     uv = np.column_stack([u.ravel(), v.ravel()])
     xy = cam.pixel_to_normalized(uv, K)
@@ -606,7 +606,7 @@ def plot_undistortion_error(undistort: Callable, K, dist, size=dt.IMAGE_SIZE, st
 
     from .selfcheck.nb04 import opencv_distort
 
-    w, h = cam._as_size(size)
+    w, h = cam.as_size(size)
     u, v = np.meshgrid(np.arange(0, w, step, dtype=float), np.arange(0, h, step, dtype=float))
     uv = np.column_stack([u.ravel(), v.ravel()])
     xy_d = cam.pixel_to_normalized(uv, K)
