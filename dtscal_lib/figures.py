@@ -604,7 +604,7 @@ def plot_undistortion_error(undistort: Callable, K, dist, size=dt.IMAGE_SIZE, st
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
 
-    from .selfcheck.nb04 import opencv_distort
+    from .selfcheck.distortion import opencv_distort
 
     w, h = cam.as_size(size)
     u, v = np.meshgrid(np.arange(0, w, step, dtype=float), np.arange(0, h, step, dtype=float))

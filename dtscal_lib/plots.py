@@ -23,7 +23,7 @@ from .boards import DUCKIETOWN_BOARD, Board
 from .camera import as_K, as_rotation, project_points as library_project_points, undistort_pixels
 from .duckietown import IMAGE_SIZE
 from .errors import DtscalError
-from .selfcheck.nb01 import use_or_fallback
+from .selfcheck.projection import use_or_fallback
 
 #: resolution of the stored figures (dots per inch)
 DPI = 80

@@ -25,6 +25,7 @@ fi
 if [ "${1:-}" = "--test" ]; then
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[test]"
   bash scripts/install-ros.sh
+  bash scripts/install-browser.sh
 else
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -e .
 fi

@@ -1,4 +1,4 @@
-"""Tests of the course self-checks for notebooks 03-05 (dtscal_lib.selfcheck.nb03/nb04/nb05).
+"""Tests of the course self-checks for notebooks 03-05 (dtscal_lib.selfcheck.zhang/distortion/ground).
 
 Each check must pass on a correct implementation (written here independently of the
 solution notebooks: OpenCV or dtscal_lib.camera wrapped, or a different derivation),
@@ -13,7 +13,7 @@ import pytest
 
 from dtscal_lib import camera as cam
 from dtscal_lib.selfcheck import FAIL, NOT_IMPLEMENTED, PASS
-from dtscal_lib.selfcheck import nb03, nb04, nb05
+from dtscal_lib.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
 
 
 def stub(*args, **kwargs):

@@ -5,7 +5,8 @@ synthetic camera, or OpenCV), never against the solution code, and prints what p
 what failed and a hint. A function that still raises ``NotImplementedError`` is reported
 as "not implemented yet" and the notebook carries on.
 
-Each notebook's checks live in their own module (``nb01`` ... ``nb05``) built on
+The checks live in one module per concept (``projection``, ``homography``, ``zhang``,
+``distortion``, ``ground``), all built on
 :func:`run_check`:
 
 >>> def check_double(fn):
@@ -136,3 +137,21 @@ def expect_close(value, expected, atol: float, what: str, rtol: float = 0.0) -> 
             + (f" + {rtol:g} relative" if rtol else "") + f"); worst at index {tuple(int(x) for x in i)}: "
             f"got {v[i]!r}, expected {e[i]!r}"
         )
+
+
+# The notebooks import every check from here (``from dtscal_lib.selfcheck import check_...``);
+# the modules below import the helpers above, so they come last.
+from .projection import check_project_points, use_or_fallback  # noqa: E402
+from .homography import check_apply_homography, check_estimate_homography  # noqa: E402
+from .zhang import (  # noqa: E402
+    check_extrinsics_from_homography,
+    check_intrinsic_constraints,
+    check_intrinsics_from_homographies,
+)
+from .distortion import (  # noqa: E402
+    check_distort_normalized,
+    check_rectification_maps,
+    check_undistort_normalized,
+    opencv_distort,
+)
+from .ground import check_board_ground_points, check_pixel_to_ground  # noqa: E402

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
 from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
-from .nb01 import K_DUCKIE, random_pose, use_or_fallback
+from .projection import K_DUCKIE, random_pose, use_or_fallback
 
 __all__ = [
     "check_apply_homography",

@@ -6,7 +6,7 @@ OpenCV's ``solvePnP`` for the board pose). Nothing here contains the exercise so
 the expected values come from the camera's definition (``H = K [r1 r2 t]``), not from a
 second implementation of the student's formulas.
 
->>> from dtscal_lib.selfcheck.nb03 import check_intrinsic_constraints
+>>> from dtscal_lib.selfcheck.zhang import check_intrinsic_constraints
 >>> check_intrinsic_constraints(my_function)   # doctest: +SKIP
 """
 

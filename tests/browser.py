@@ -1,0 +1,39 @@
+"""Headless Chromium for the browser tests: Debian's /usr/bin/chromium driven by Playwright.
+
+Playwright never downloads a browser here; ``scripts/install-browser.sh`` (run by the README's
+test command) installs Debian's. Under CI (any spelling of CI=true) a missing browser is a
+failure, elsewhere a skip.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+
+CHROMIUM_ARGS = [
+    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]
+
+
+def in_ci() -> bool:
+    """True when CI is set to a true value, whatever its spelling (true, TRUE, 1, yes)."""
+    return os.environ.get("CI", "").strip().lower() in {"1", "true", "yes", "on"}
+
+
+def chromium_path() -> str:
+    """Path of Debian's chromium; a skip locally, a failure under CI, when it is missing."""
+    path = shutil.which("chromium") or shutil.which("chromium-browser")
+    if path is None:
+        msg = "Debian's chromium is not installed (run: bash scripts/install-browser.sh)"
+        if in_ci():
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return path
+
+
+def launch_chromium(playwright):
+    """Launch headless Chromium with the flags this closed network needs; returns the Browser."""
+    return playwright.chromium.launch(executable_path=chromium_path(), headless=True, args=CHROMIUM_ARGS)
