@@ -56,8 +56,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .camera import CameraModel, as_K, as_size, project_points
+from .camera import CameraModel, as_K, as_points, as_size, project_points
 from .errors import CalibrationError, DtscalError
+from .homography import estimate_homography
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
 
@@ -214,19 +215,7 @@ def _check_views(object_points, image_points, image_size):
 
 
 def _view_array(a, dims: tuple[int, ...], name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{name} must be a numeric array, got {type(a).__name__}") from None
-    if arr.ndim == 3 and arr.shape[1] == 1:  # OpenCV's (N, 1, d)
-        arr = arr.reshape(arr.shape[0], arr.shape[2])
-    if arr.ndim != 2 or arr.shape[1] not in dims:
-        want = " or ".join(f"(N, {d})" for d in dims)
-        raise CalibrationError(f"{name} must have shape {want} (or (N, 1, {dims[-1]})), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.sum(~np.all(np.isfinite(arr), axis=1)))
-        raise CalibrationError(f"{name} contain NaN or infinite values ({bad} point(s)); remove them first")
-    return arr
+    return as_points(a, dims, name, error=CalibrationError)
 
 
 def _line_spread(p: np.ndarray, absolute: bool = False) -> float:
@@ -243,39 +232,9 @@ def _line_spread(p: np.ndarray, absolute: bool = False) -> float:
 
 
 # =========================================================================== homographies, Zhang
-def _similarity_normalizer(p: np.ndarray) -> np.ndarray:
-    """Hartley normalization (3, 3): centroid to 0, mean distance sqrt(2)."""
-    c = p.mean(axis=0)
-    d = np.sqrt(((p - c) ** 2).sum(axis=1)).mean()
-    s = np.sqrt(2.0) / d
-    return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
-
-
 def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-    """Normalized DLT homography from board-plane points to pixels.
-
-    Parameters
-    ----------
-    plane_points : (N, 2) float64 board coordinates (any unit), N >= 4, not collinear
-    pixels : (N, 2) float64 image points
-
-    Returns
-    -------
-    (3, 3) float64 ``H`` with ``[u, v, 1] ~ H [x, y, 1]``, scaled so ``H[2, 2] = 1``
-    when possible (else unit Frobenius norm).
-    """
-    Ta, Tb = _similarity_normalizer(plane_points), _similarity_normalizer(pixels)
-    a = plane_points @ Ta[:2, :2].T + Ta[:2, 2]
-    b = pixels @ Tb[:2, :2].T + Tb[:2, 2]
-    n = len(a)
-    A = np.zeros((2 * n, 9))
-    A[0::2, 0:2], A[0::2, 2] = a, 1.0
-    A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
-    A[1::2, 3:5], A[1::2, 5] = a, 1.0
-    A[1::2, 6:8], A[1::2, 8] = -b[:, 1:2] * a, -b[:, 1]
-    Hn = np.linalg.svd(A)[2][-1].reshape(3, 3)
-    H = np.linalg.solve(Tb, Hn @ Ta)
-    return H / H[2, 2] if abs(H[2, 2]) > 1e-12 * np.abs(H).max() else H / np.linalg.norm(H)
+    """Normalized DLT homography from board-plane points to pixels (:func:`dtscal_lib.homography.estimate_homography`)."""
+    return estimate_homography(plane_points, pixels)
 
 
 def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:

@@ -10,9 +10,10 @@ related to the (rectified, i.e. undistorted) image by a homography, the seed's e
 ``camera_extrinsic/<ROBOT>.yaml`` stores it. A raw (distorted) camera pixel is first
 rectified (``undistortPoints`` with ``R`` and ``P``), then mapped with ``H``.
 
-The extrinsic procedure (:func:`calibrate_extrinsics`) follows ``dts duckiebot
-calibrate_extrinsics``: one frame of the 7x5-corner, 31 mm board lying flat in front of
-the robot (near row of inner corners at x = 0.191 m, centred), resized to width 640,
+The extrinsic procedure on one image (:func:`extrinsics_from_image`; the headless
+:func:`dtscal_lib.pipeline.calibrate_extrinsics` finds that image in a recording) follows
+``dts duckiebot calibrate_extrinsics``: one frame of the 7x5-corner, 31 mm board lying flat
+in front of the robot (near row of inner corners at x = 0.191 m, centred), resized to width 640,
 rectified with the intrinsic calibration, corners detected and ordered from the
 near-right corner, ``cv2.findHomography(..., RANSAC)``, and Duckietown's ``H[1][2] > 0``
 corruption check.
@@ -33,9 +34,10 @@ import numpy as np
 
 from . import duckietown as dt
 from .boards import DUCKIETOWN_BOARD, GROUND_NEAR_ROW_X, Board, ground_points, order_for_ground
-from .camera import CameraModel, rectify_image
+from .camera import CameraModel, as_points, rectify_image
 from .errors import CalibrationError, DtscalError
 from .detect import detect_board_still
+from .homography import apply_homography, as_homography, invert_homography
 
 #: default RANSAC inlier threshold, metres on the ground (Duckietown passes OpenCV's
 #: default of 3, which in metres rejects nothing; 1 cm rejects a mis-detected corner)
@@ -44,26 +46,11 @@ RANSAC_THRESHOLD_M = 0.01
 
 # --------------------------------------------------------------------------- checks
 def _points(a, name: str) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
-    if arr.ndim == 1 and arr.size == 2:
-        arr = arr.reshape(1, 2)
-    if arr.ndim == 3 and arr.shape[1] == 1:
-        arr = arr.reshape(-1, arr.shape[2])
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise DtscalError(f"{name} must have shape (N, 2), got {np.shape(a)}")
-    if not np.all(np.isfinite(arr)):
-        raise DtscalError(f"{name} contains NaN or infinite values")
-    return arr
+    return as_points(a, 2, name)
 
 
 def _homography(H, name: str = "H") -> np.ndarray:
-    H = np.asarray(H, dtype=np.float64)
-    if H.size != 9:
-        raise DtscalError(f"{name} must be a 3x3 homography (or 9 row-major values), got shape {H.shape}")
-    H = H.reshape(3, 3)
-    if not np.all(np.isfinite(H)):
-        raise DtscalError(f"{name} contains NaN or infinite values")
-    return H
+    return as_homography(H, name)
 
 
 # --------------------------------------------------------------------------- estimation
@@ -122,44 +109,6 @@ def estimate_ground_homography(pixels, ground, *, method: str | int = "ransac",
 
 
 # --------------------------------------------------------------------------- mapping
-def _apply(H: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Homogeneous products: returns (N, 3) ``H [p, 1]`` and the (N,) relative size of w."""
-    hom = pts @ H[:, :2].T + H[:, 2]
-    scale = np.abs(pts[:, 0] * H[2, 0]) + np.abs(pts[:, 1] * H[2, 1]) + abs(H[2, 2])
-    return hom, scale
-
-
-def apply_homography(H, pts) -> np.ndarray:
-    """Map points with a homography: ``[x, y, w]^T = H [u, v, 1]^T``, then ``(x / w, y / w)``.
-
-    Parameters
-    ----------
-    H : (3, 3) homography
-    pts : (N, 2) points (or a single (2,) point)
-
-    Returns
-    -------
-    (N, 2) float64 mapped points
-
-    Raises
-    ------
-    DtscalError
-        If a point maps to infinity (``w = 0``: for a ground homography, a pixel on
-        the horizon line).
-    """
-    H = _homography(H)
-    pts = _points(pts, "points")
-    hom, scale = _apply(H, pts)
-    w = hom[:, 2]
-    bad = np.abs(w) <= 1e-12 * scale
-    if np.any(bad):
-        raise DtscalError(
-            f"{int(bad.sum())} point(s) map to infinity under the homography (e.g. {pts[bad][0].tolist()}); "
-            "for a ground homography these pixels lie on the horizon, not on the ground"
-        )
-    return hom[:, :2] / w[:, None]
-
-
 def pixel_to_ground(H, uv_rectified) -> np.ndarray:
     """Rectified pixels (N, 2) -> ground points (N, 2), metres (x forward, y left)."""
     return apply_homography(H, uv_rectified)
@@ -167,11 +116,10 @@ def pixel_to_ground(H, uv_rectified) -> np.ndarray:
 
 def ground_to_pixel(H, xy) -> np.ndarray:
     """Ground points (N, 2), metres -> rectified pixels (N, 2), with ``H^-1``."""
-    H = _homography(H)
     try:
-        Hinv = np.linalg.inv(H)
-    except np.linalg.LinAlgError:
-        raise DtscalError("H is singular and cannot be inverted; recalibrate the extrinsics") from None
+        Hinv = invert_homography(H)
+    except DtscalError as exc:
+        raise DtscalError(f"{exc} (recalibrate the extrinsics)") from None
     return apply_homography(Hinv, xy)
 
 
@@ -189,7 +137,7 @@ def distorted_pixel_to_ground(camera: CameraModel, H, uv) -> np.ndarray:
 # --------------------------------------------------------------------------- the procedure
 @dataclass
 class ExtrinsicResult:
-    """Outcome of :func:`calibrate_extrinsics`.
+    """Outcome of :func:`extrinsics_from_image`.
 
     Attributes
     ----------
@@ -253,7 +201,7 @@ def _find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, s
     return det.corners, "found" if det.found else det.reason
 
 
-def calibrate_extrinsics(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
+def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
                          method: str = "ransac") -> ExtrinsicResult:
     """Duckietown's extrinsic calibration from one frame of the board lying in front of the robot.
 
@@ -401,7 +349,8 @@ def draw_ground_grid(rectified_image: np.ndarray, H, *, spacing: float = 0.05, x
     ref = np.sign(H[2] @ np.array([(w - 1) / 2.0, h - 1.0, 1.0]))
 
     def polyline(pts_ground: np.ndarray) -> None:
-        hom, scale = _apply(Hinv, pts_ground)
+        hom = pts_ground @ Hinv[:, :2].T + Hinv[:, 2]
+        scale = np.abs(pts_ground) @ np.abs(Hinv[2, :2]) + abs(Hinv[2, 2])
         # H^-1 g = p / w' with w' = H[2] . p: in front when its sign matches ref's
         front = np.sign(hom[:, 2]) == ref
         front &= np.abs(hom[:, 2]) > 1e-9 * scale

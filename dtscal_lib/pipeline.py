@@ -255,7 +255,7 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
     image rectified with that file's ``P`` to ground metres (robot frame: x forward,
     y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given.
     """
-    from .ground import calibrate_extrinsics as fit_on_image
+    from .ground import extrinsics_from_image as fit_on_image
 
     calib = calib_files.load_intrinsics(intrinsics_file)
     camera = calib.camera()
