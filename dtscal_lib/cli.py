@@ -2,11 +2,12 @@
 
 Sub-commands::
 
-    dtscal course                  open the course in JupyterLab (notebooks/ on the bundled session)
+    dtscal course                  open the course in JupyterLab (the student's workspace/; --instructor: solutions/)
     dtscal synth --out data        regenerate the synthetic recorded Duckiebot session
     dtscal calibrate-intrinsics    frames -> camera_intrinsic/<ROBOT>.yaml
     dtscal calibrate-extrinsics    one frame on the board -> camera_extrinsic/<ROBOT>.yaml
-    dtscal release OUT | --check   write the student version of the course / check notebooks/
+    dtscal handout OUT             write the student hand-out (alias: dtscal release OUT)
+    dtscal release --check|--execute  check notebooks/ against solutions/ / re-run solutions, regenerate
 
 Exit codes: 0 success, 1 a check failed, 2 bad input (the message says what to do).
 """
@@ -131,21 +132,18 @@ def cmd_release(args) -> int:
 
 
 def cmd_course(args) -> int:
+    from .course import workspace
     from .datasets import session_dir
     from .paths import repo_root
 
     root = repo_root()
+    if args.update:
+        report = workspace.update_workspace(root)
+        print(report.text())
+        return 0 if report.ok else 1
     session_dir()  # fails early, with the fix, if the recording is missing
-    cmd = [sys.executable, "-m", "jupyterlab", f"--ServerApp.root_dir={root}", f"--port={args.port}"]
-    if args.no_browser:
-        cmd.append("--no-browser")
-    if args.ip:
-        cmd.append(f"--ip={args.ip}")
-    if hasattr(os, "geteuid") and os.geteuid() == 0:
-        cmd.append("--allow-root")  # containers and course VMs often run as root
-    notebook = root / "notebooks" / "01_pinhole_projection.ipynb"
-    if notebook.exists():
-        cmd.append(str(notebook))
+    cmd = workspace.jupyter_command(root, instructor=args.instructor, port=args.port, ip=args.ip,
+                                    no_browser=args.no_browser)
     print("starting JupyterLab:", " ".join(cmd), file=sys.stderr)
     os.execv(sys.executable, cmd)
     return 0  # pragma: no cover
@@ -186,7 +184,22 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-q", "--quiet", action="store_true")
     sp.set_defaults(func=cmd_synth)
 
-    sp = sub.add_parser("release", help="student version of the course; --check compares notebooks/ with solutions/")
+    for name in ("handout", "release"):
+        sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ with solutions/")
+        release_args(sp)
+
+    sp = sub.add_parser("course", help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
+    sp.add_argument("--port", type=int, default=8888)
+    sp.add_argument("--ip", default=None)
+    sp.add_argument("--no-browser", action="store_true")
+    sp.add_argument("--instructor", action="store_true", help="open solutions/ (the instructor's kit) instead")
+    sp.add_argument("--update", action="store_true",
+                    help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
+    sp.set_defaults(func=cmd_course)
+    return p
+
+
+def release_args(sp) -> None:
     sp.add_argument("out", nargs="?", help="folder to write the student release into")
     sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
     sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/")
@@ -194,13 +207,6 @@ def build_parser() -> argparse.ArgumentParser:
                     help="re-run every solution notebook (storing its outputs), then regenerate notebooks/")
     sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")
     sp.set_defaults(func=cmd_release)
-
-    sp = sub.add_parser("course", help="open the course in JupyterLab")
-    sp.add_argument("--port", type=int, default=8888)
-    sp.add_argument("--ip", default=None)
-    sp.add_argument("--no-browser", action="store_true")
-    sp.set_defaults(func=cmd_course)
-    return p
 
 
 def main(argv=None) -> int:

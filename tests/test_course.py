@@ -138,7 +138,7 @@ def test_degradation_experiment_shows_parallel_views_are_worse():
     text = fig.degradation_experiment(ref_intrinsics, dt.default_K(), view_counts=(10,),
                                       tilts=((0.5, 2.0), (20.0, 45.0)), trials=3)
     rows = [l for l in text.splitlines() if "deg" in l and l.strip()[0].isdigit()]
-    vals = [float(r.split()[2]) for r in rows]
+    vals = [float("inf") if "> 100" in r else float(r.split()[2]) for r in rows]
     assert vals[0] > 10 * vals[1]
 
 
