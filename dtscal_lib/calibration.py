@@ -233,7 +233,10 @@ def _line_spread(p: np.ndarray, absolute: bool = False) -> float:
 
 # =========================================================================== homographies, Zhang
 def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-    """Normalized DLT homography from board-plane points to pixels (:func:`dtscal_lib.homography.estimate_homography`)."""
+    """Normalized DLT homography from board-plane points to pixels.
+
+    The kit's one implementation is :func:`dtscal_lib.homography.estimate_homography`.
+    """
     return estimate_homography(plane_points, pixels)
 
 

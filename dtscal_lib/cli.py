@@ -161,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images")
         sp.add_argument("--topic", help="image topic in a bag (default: the one ending in /image/compressed)")
         sp.add_argument("--robot", help="robot name (default: from the bag topic /ROBOT/camera_node/...)")
-        sp.add_argument("--out", default="calibrations", help="calibrations folder to write into (default ./calibrations)")
+        sp.add_argument("--out", default="calibrations",
+                        help="calibrations folder to write into (default ./calibrations)")
         sp.add_argument("--no-write", action="store_true", help="compute only, write no file")
         sp.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
         sp.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -185,10 +186,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_synth)
 
     for name in ("handout", "release"):
-        sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ with solutions/")
+        sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ "
+                                       "with solutions/")
         release_args(sp)
 
-    sp = sub.add_parser("course", help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
+    sp = sub.add_parser("course",
+                        help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
     sp.add_argument("--port", type=int, default=8888)
     sp.add_argument("--ip", default=None)
     sp.add_argument("--no-browser", action="store_true")

@@ -165,7 +165,8 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     progress : optional wrapper around the frame iterator (e.g. tqdm)
     """
     src = open_source(source_spec, topic=topic)
-    robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
+    robot_name = (_robot_name(robot, src) if out_dir is not None
+                  else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
     tally = FrameTally()
     tracker: CoverageTracker | None = None
     stills_obj: list[np.ndarray] = []
@@ -260,7 +261,8 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
     calib = calib_files.load_intrinsics(intrinsics_file)
     camera = calib.camera()
     src = open_source(source_spec, topic=topic)
-    robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
+    robot_name = (_robot_name(robot, src) if out_dir is not None
+                  else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
     tally = FrameTally()
     frames = progress(src) if progress else src
     last_error = None

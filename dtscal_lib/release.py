@@ -473,7 +473,8 @@ def release(out_dir, repo_root=None) -> Path:
 #: lines that only convert/validate inputs (``x = np.asarray(x, dtype=float).reshape(-1, 2)``):
 #: every function starts with them, so finding one elsewhere proves nothing
 _BOILERPLATE = re.compile(
-    r"^[\w, ]+ = (np\.)?(asarray|array|atleast_2d|float|int)\((?:[^()]|\([^()]*\))*\)(\.(reshape|ravel|copy|astype)\([^()]*\))*$"
+    r"^[\w, ]+ = (np\.)?(asarray|array|atleast_2d|float|int)\((?:[^()]|\([^()]*\))*\)"
+    r"(\.(reshape|ravel|copy|astype)\([^()]*\))*$"
 )
 
 

@@ -163,7 +163,8 @@ def test_hostile_tag_is_not_executed(tmp_path, loader):
     marker = tmp_path / "pwned"
     p = tmp_path / "evil.yaml"
     p.write_text(f'homography: !!python/object/apply:os.system ["touch {marker}"]\n'
-                 f'image_width: !!python/object/apply:pathlib.Path.touch [!!python/object/apply:pathlib.Path ["{marker}"]]\n')
+                 'image_width: !!python/object/apply:pathlib.Path.touch '
+                 f'[!!python/object/apply:pathlib.Path ["{marker}"]]\n')
     with pytest.raises(CalibrationFileError, match=r"evil\.yaml: contains a non-data tag .* was not loaded"):
         loader(p)
     assert not marker.exists()

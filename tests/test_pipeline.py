@@ -8,12 +8,10 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-import yaml
 
 from dtscal_lib import calib_files, datasets, ground, pipeline
 from dtscal_lib.boards import ground_points

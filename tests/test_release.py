@@ -27,7 +27,8 @@ def toy(exercise_source=EXERCISE, extra_cells=()):
     nb.metadata = {"kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"},
                    "language_info": {"name": "python", "version": "3.11.9"}, "widgets": {"state": {}}}
     imports = new_code_cell("import numpy as np\n%matplotlib inline", metadata={"tags": ["imports"]})
-    ex = new_code_cell(exercise_source, metadata={"tags": ["exercise"], "execution": {"iopub.status.busy": "2024-01-01T00:00:00Z"}, "scrolled": True})
+    ex = new_code_cell(exercise_source, metadata={"tags": ["exercise"], "scrolled": True,
+                                                  "execution": {"iopub.status.busy": "2024-01-01T00:00:00Z"}})
     ex.outputs = [new_output("stream", name="stdout", text="hello")]
     ex.execution_count = 3
     nb.cells = [new_markdown_cell("# Toy"), imports, ex, new_code_cell("double(2)"), *extra_cells]

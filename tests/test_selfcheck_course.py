@@ -250,7 +250,8 @@ def undistort_fixed_point(xy_d, dist, n_iter=200):
 
 
 def undistort_opencv_default(xy_d, dist):
-    return cv2.undistortPoints(np.asarray(xy_d, float).reshape(-1, 1, 2), np.eye(3), np.asarray(dist, float)).reshape(-1, 2)
+    pts = np.asarray(xy_d, float).reshape(-1, 1, 2)
+    return cv2.undistortPoints(pts, np.eye(3), np.asarray(dist, float)).reshape(-1, 2)
 
 
 def undistort_returns_distorted(xy_d, dist):  # "forgot to invert": distorts again

@@ -62,7 +62,8 @@ def test_student_code_survives_a_course_update(tmp_path):
     nb = nbformat.read(str(sol), as_version=4)
     for cell in nb.cells:
         if "def project_points(" in cell.source:
-            cell.source = cell.source.replace("Project world points into pixels", "Project world points (metres) into pixels")
+            cell.source = cell.source.replace("Project world points into pixels",
+                                              "Project world points (metres) into pixels")
     nb.cells.insert(1, nbformat.v4.new_markdown_cell("A correction from your instructor."))
     nbformat.write(nb, str(sol))
     rel.generate_notebooks(root / "solutions", root / "notebooks")

@@ -68,7 +68,8 @@ def intrinsics_table(estimates: dict, K_true: np.ndarray | None = None) -> str:
     """
     long = max([len(n) for n in estimates] + [5])
     if long > NAME_WIDTH:
-        raise DtscalError(f"estimate names must be at most {NAME_WIDTH} characters; shorten {max(estimates, key=len)!r}")
+        raise DtscalError(f"estimate names must be at most {NAME_WIDTH} characters; "
+                          f"shorten {max(estimates, key=len)!r}")
     head = f"{'':{NAME_WIDTH}s}{'fx':>9s}{'fy':>9s}{'cx':>9s}{'cy':>9s}{'s':>8s}"
     if K_true is not None:
         head += f"{'max |err|':>11s}"
