@@ -4,9 +4,10 @@ Pipeline, for ``V`` views of a planar target (any planar point set, any unit):
 
 1. **Check the input** at the boundary: shapes, NaN, at least 3 views, at least 4
    non-collinear points per view, planar object points, matching lengths.
-2. **Homographies**: one normalized DLT per view, board plane -> pixels.
-3. **Degeneracy check**: every view gives Zhang's two constraints (the seed's
-   equations (12)-(13)) on ``b = (B11, B12, B22, B13, B23, B33)``,
+2. **Homographies**: one normalized DLT per view, board plane -> pixels
+   (:func:`dtscal_lib.homography.estimate_homography`).
+3. **Degeneracy check**: every view gives Zhang's two constraints (activity
+   text, eqs. (12)-(13)) on ``b = (B11, B12, B22, B13, B23, B33)``,
    ``B = K^-T K^-1``. If the stacked constraint matrix ``V`` (plus ``B12 = 0`` when the
    skew is not estimated) does not pin ``b`` down up to scale -- all boards parallel,
    the same pose over and over -- we stop *before* optimising garbage. A strongly
@@ -311,7 +312,7 @@ def _intrinsics_from_b(b: np.ndarray) -> np.ndarray | None:
 def zhang_closed_form(homographies, image_size, *, skew: bool = True) -> np.ndarray | None:
     """Zhang's closed-form intrinsics from plane-to-image homographies.
 
-    Solves ``V b = 0`` (equations (12)-(13) of every view, stacked), ``b`` the
+    Solves ``V b = 0`` (activity text, eqs. (12)-(13) of every view, stacked), ``b`` the
     upper triangle of ``B = K^-T K^-1``, in image-normalized coordinates for
     conditioning, then reads ``K`` off ``B``.
 

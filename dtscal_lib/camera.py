@@ -1,6 +1,6 @@
 """Camera model: intrinsic matrix with skew, lens distortion, projection, rectification.
 
-Conventions (the seed's equations (1)-(2)):
+Conventions (activity text, eqs. (1)-(2)):
 
 * A world point ``X`` (N, 3) is moved into the camera frame by ``Xc = R X + t``.
 * Normalized coordinates are ``x = Xc / Zc`` (N, 2): the image of a unit-focal pinhole.
@@ -232,7 +232,7 @@ def as_rotation(r) -> np.ndarray:
 
 
 def project_points(X, r, t, K, dist=None) -> np.ndarray:
-    """Project world points into pixels (eqs. (1)-(2) plus lens distortion).
+    """Project world points into pixels (activity text, eqs. (1)-(2), plus lens distortion).
 
     Parameters
     ----------

@@ -2,7 +2,8 @@
 
 The ground plane is the robot frame's ``z = 0`` plane: origin below the midpoint of the
 drive wheels, **x forward, y left**, in metres. A plane seen by a pinhole camera is
-related to the (rectified, i.e. undistorted) image by a homography, the seed's eq. (13):
+related to the (rectified, i.e. undistorted) image by a homography (activity text, eqs. (4)-(6),
+read from the image to the plane):
 
     s [x, y, 1]^T = H [u, v, 1]^T
 

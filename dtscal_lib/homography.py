@@ -70,7 +70,7 @@ def estimate_homography(src, dst) -> np.ndarray:
     """The homography mapping ``src`` to ``dst``, by the normalized DLT.
 
     Both point sets are conditioned (:func:`normalizer`); each pair gives the two rows of
-    ``A h = 0`` obtained by cross-multiplying eq. (6); ``h`` is the right singular vector
+    ``A h = 0`` obtained by cross-multiplying eq. (6) of the activity text; ``h`` is the right singular vector
     of the smallest singular value; the conditioning is undone, ``H = T_dst^-1 H~ T_src``.
     The DLT minimizes an algebraic error; for the geometric (pixel) error refine it, as
     ``cv2.findHomography`` does.

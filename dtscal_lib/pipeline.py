@@ -1,7 +1,7 @@
 """The headless calibration pipeline: frames in, Duckietown calibration files out.
 
 These are the functions behind ``dtscal calibrate-intrinsics`` and
-``dtscal calibrate-extrinsics``; the live notebook wraps the same steps frame by frame.
+``dtscal calibrate-extrinsics``; the Duckiebot camera notebook (06) runs the same steps frame by frame.
 Nothing here raises on a bad frame: every unusable frame is counted under a reason
 and skipped. Errors are raised only when the run as a whole cannot produce a
 calibration, and then the message says what to do.
