@@ -110,6 +110,6 @@ def test_course_command_roots_students_in_the_workspace_and_opens_notebook_01(tm
     root = _kit(tmp_path)
     cmd = ws.jupyter_command(root, no_browser=True, port=9999)
     assert f"--ServerApp.root_dir={root / 'workspace'}" in cmd
-    assert "--ServerApp.default_url=/lab/tree/01_pinhole_projection.ipynb" in cmd
+    assert "--LabApp.default_url=/lab/tree/01_pinhole_projection.ipynb" in cmd
     cmd = ws.jupyter_command(root, instructor=True)
     assert f"--ServerApp.root_dir={root / 'solutions'}" in cmd

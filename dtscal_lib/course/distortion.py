@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import camera as cam
 from .. import duckietown as dt
+from .fallback import Fallback
 from .figure import CourseFigure, new_figure, show_images
 
 __all__ = ["grid_image", "distort_image", "plot_distortion_field", "plot_undistortion_error", "compare_alpha"]
@@ -66,19 +67,22 @@ def plot_distortion_field(distort: Callable, K, dist, size=dt.IMAGE_SIZE, step: 
 
 
 def plot_undistortion_error(undistort: Callable, K, dist, size=dt.IMAGE_SIZE, step: int = 8,
-                            label: str = "yours") -> CourseFigure:
+                            label: str | None = None) -> CourseFigure:
     """How well an undistortion inverts the lens, over the image: ``undistort`` vs OpenCV's default.
 
     For every pixel of a grid, the recorded (distorted) pixel is undistorted, then
     distorted again with OpenCV's model; the map shows the round-trip error in pixels (log
     scale, floored at 1e-12 px). OpenCV's ``undistortPoints`` stops after a fixed 5
-    fixed-point iterations. Titles give the worst error as a bound (round-off digits are
+    fixed-point iterations. ``label`` names the left panel (default: from the notebook's
+    :class:`~dtscal_lib.course.fallback.Fallback`, "your undistort_normalized" or the stand-in). Titles give the worst error as a bound (round-off digits are
     not shown: they differ between machines).
     """
     from matplotlib.colors import LogNorm
 
     from ..selfcheck.distortion import opencv_distort
 
+    if label is None:  # the notebook's Fallback says whose function runs
+        label = undistort.label if isinstance(undistort, Fallback) else "yours"
     w, h = cam.as_size(size)
     u, v = np.meshgrid(np.arange(0, w, step, dtype=float), np.arange(0, h, step, dtype=float))
     uv = np.column_stack([u.ravel(), v.ravel()])

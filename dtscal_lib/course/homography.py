@@ -69,7 +69,7 @@ def unnormalized_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
 
 def _label(estimate: Callable) -> str:
     if isinstance(estimate, Fallback):
-        return f"normalized DLT: {estimate.label}"
+        return f"normalized DLT: {estimate.label}" if estimate.uses_student else estimate.label
     return f"normalized DLT: {getattr(estimate, '__name__', 'yours')}"
 
 

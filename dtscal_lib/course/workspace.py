@@ -190,7 +190,7 @@ def jupyter_command(root, *, instructor: bool = False, port: int = 8888, ip: str
         folder = ensure_workspace(root)
     cmd = [sys.executable, "-m", "jupyterlab", f"--ServerApp.root_dir={folder}", f"--port={port}"]
     if (folder / FIRST_NOTEBOOK).exists():
-        cmd.append(f"--ServerApp.default_url=/lab/tree/{FIRST_NOTEBOOK}")
+        cmd.append(f"--LabApp.default_url=/lab/tree/{FIRST_NOTEBOOK}")  # also the printed URL
     if no_browser:
         cmd.append("--no-browser")
     if ip:
