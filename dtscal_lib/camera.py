@@ -54,7 +54,7 @@ def as_points(a, dim: int | tuple[int, ...], name: str, *, error: type[DtscalErr
         raise error(f"{name} must have shape {want}, got {np.shape(a)}")
     if not np.all(np.isfinite(arr)):
         bad = int(np.sum(~np.all(np.isfinite(arr), axis=1)))
-        raise error(f"{name} contains NaN or infinite values ({bad} point(s)); remove them first")
+        raise error(f"{name} contain NaN or infinite values ({bad} point(s)); remove them first")
     return arr
 
 
