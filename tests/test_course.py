@@ -165,3 +165,24 @@ def test_distort_image_is_undone_by_the_rectification_maps():
     err_back = np.mean(np.abs(back[inner] - ideal[inner]))
     err_bent = np.mean(np.abs(bent[inner] - ideal[inner]))
     assert err_back < 3.0 and err_bent > 5 * err_back, (err_back, err_bent)
+
+
+def test_pinhole_explorer_renders_at_its_shown_size_and_names_the_function(capsys):
+    import struct
+
+    from dtscal_lib.course.projection import EXPLORER_PX
+
+    project = fig.use_or_fallback(stub, lambda K, R, t, X: cam.project_points(X, R, t, K),
+                                  fallback_name="the kit's camera.project_points")
+    box = fig.pinhole_explorer(project, dt.default_K())
+    state = box.explorer
+    png = state.image.value
+    width, height = struct.unpack(">II", png[16:24])  # the PNG header's IHDR size
+    assert (width, height) == EXPLORER_PX
+    assert state.image.layout.width == f"{EXPLORER_PX[0]}px"  # shown 1:1, not stretched
+    assert "the kit's camera.project_points" in state.status.value  # the stub raised: the stand-in drew it
+    # every slider label fits its description box (about 7 px per character at the default font)
+    for s in state.sliders.values():
+        assert 7 * len(s.description) <= int(s.style.description_width.rstrip("px")), s.description
+    state.sliders["distance"].value = 1.0  # redraws without error
+    assert state.image.value != png

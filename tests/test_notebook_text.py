@@ -59,7 +59,8 @@ def _claims_03(nb) -> None:
     assert "On undistorted corners the closed form lands within about a pixel of the truth" in prose
     assert _table_err(text, "closed form, undistorted (truth)") < 1.0
     assert _table_err(text, "closed form, undistorted (full calib.)") < 1.0  # the label is not cut
-    assert "per-view RMS error reaches several pixels, while the full\ncalibration stays far below a pixel on every view" in prose
+    assert ("per-view RMS error reaches several pixels, while the full\ncalibration stays far below a pixel "
+            "on every view") in prose
     worst_cf = float(re.search(r"closed form: worst view ([0-9.]+) px RMS", text).group(1))
     worst_full = float(re.search(r"full calibration: worst view ([0-9.]+) px RMS", text).group(1))
     assert worst_cf > 3.0 and worst_full < 0.5

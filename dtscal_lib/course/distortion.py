@@ -74,7 +74,8 @@ def plot_undistortion_error(undistort: Callable, K, dist, size=dt.IMAGE_SIZE, st
     distorted again with OpenCV's model; the map shows the round-trip error in pixels (log
     scale, floored at 1e-12 px). OpenCV's ``undistortPoints`` stops after a fixed 5
     fixed-point iterations. ``label`` names the left panel (default: from the notebook's
-    :class:`~dtscal_lib.course.fallback.Fallback`, "your undistort_normalized" or the stand-in). Titles give the worst error as a bound (round-off digits are
+    :class:`~dtscal_lib.course.fallback.Fallback`, "your undistort_normalized" or the
+    stand-in). Titles give the worst error as a bound below 1e-9 px (round-off digits are
     not shown: they differ between machines).
     """
     from matplotlib.colors import LogNorm

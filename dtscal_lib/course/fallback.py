@@ -49,6 +49,8 @@ class Fallback:
     fallback_name: str
     uses_student: bool
     reason: str = ""
+    #: True when the last call ran the stand-in (always, or because the student's function raised)
+    last_fell_back: bool = False
     _warned: list = field(default_factory=list, repr=False)
 
     @property
@@ -62,10 +64,12 @@ class Fallback:
         return f"your {self.name}" if self.uses_student else self.fallback_name
 
     def __call__(self, *args, **kwargs):
+        self.last_fell_back = not self.uses_student
         if self.uses_student:
             try:
                 return self.student(*args, **kwargs)
             except Exception as exc:  # the student's code failed on the notebook's data
+                self.last_fell_back = True
                 if not self._warned:
                     self._warned.append(True)
                     banner(f"your `{self.name}` raised {type(exc).__name__}: {exc}",

@@ -144,6 +144,8 @@ class _Explorer:
 
     def _drawn_with(self) -> str:
         if isinstance(self.project, Fallback):
+            if self.project.last_fell_back and self.project.uses_student:
+                return f"your {self.project.name} failed here: drawn with {self.project.fallback_name}"
             return f"drawn with {self.project.label}"
         return f"drawn with {getattr(self.project, '__name__', 'your function')}"
 
