@@ -273,9 +273,18 @@ def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray
     A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
     A[1::2, 3:5], A[1::2, 5] = a, 1.0
     A[1::2, 6:8], A[1::2, 8] = -b[:, 1:2] * a, -b[:, 1]
-    Hn = np.linalg.svd(A)[2][-1].reshape(3, 3)
+    Hn = _null_vector(A).reshape(3, 3)
     H = np.linalg.solve(Tb, Hn @ Ta)
     return H / H[2, 2] if abs(H[2, 2]) > 1e-12 * np.abs(H).max() else H / np.linalg.norm(H)
+
+
+def _null_vector(A: np.ndarray) -> np.ndarray:
+    """Unit right singular vector of the smallest singular value of ``A`` (m, n).
+
+    Only the thin SVD is computed when ``m >= n``: the full one would build an
+    (m, m) matrix of left singular vectors, quadratic in the number of views or points.
+    """
+    return np.linalg.svd(A, full_matrices=A.shape[0] < A.shape[1])[2][-1]
 
 
 def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:
@@ -366,7 +375,7 @@ def zhang_closed_form(homographies, image_size, *, skew: bool = True) -> np.ndar
     """
     size = (int(image_size[0]), int(image_size[1]))
     V = _constraint_matrix(homographies, size, skew)
-    b = np.linalg.svd(V)[2][-1]
+    b = _null_vector(V)
     Kn = _intrinsics_from_b(b)
     if Kn is None:
         return None
