@@ -68,6 +68,12 @@ INTRINSIC_KEYS = ("image_width", "image_height", "camera_name", "camera_matrix",
                   "distortion_coefficients", "rectification_matrix", "projection_matrix")
 
 _ROBOT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+#: longest robot name: a hostname label (Duckiebots are named by their hostname); the
+#: kit's longest file name for it, the backup's temporary ``.NAME.rejected.yaml.bak.XXXXXXXX.tmp``,
+#: then stays far below every filesystem's 255-byte limit
+MAX_ROBOT_NAME = 63
+#: ``NAME.rejected.yaml`` keeps a refused calibration beside ``NAME.yaml`` (``--keep-anyway``)
+REJECTED_SUFFIX = ".rejected"
 # tolerances of the plausibility checks
 _ROT_TOL = 1e-6
 _MAX_SKEW_RATIO = 0.05   # |s| / fx
@@ -79,14 +85,26 @@ def check_robot_name(robot: str) -> str:
     """Validate a robot name for writing its calibration; returns it (``default`` is refused)."""
     if not isinstance(robot, str) or not robot:
         raise CalibrationFileError(f"robot name must be a non-empty string, got {robot!r}; pass --robot NAME")
-    if robot == dt.DEFAULT_NAME:
+    if robot.lower() == dt.DEFAULT_NAME:  # default.yaml, also on a case-insensitive filesystem
         raise CalibrationFileError(
-            "default.yaml is the factory calibration and is never overwritten; pass --robot NAME"
+            f"--robot {robot}: default.yaml is the factory calibration and is never overwritten (names are "
+            "compared ignoring case); pass --robot NAME"
         )
     if not _ROBOT_NAME.fullmatch(robot) or ".." in robot:
         raise CalibrationFileError(
-            f"robot name {robot!r} is not valid: use letters, digits, '_', '-' and '.', without path "
+            f"robot name {robot[:80]!r} is not valid: use letters, digits, '_', '-' and '.', without path "
             "separators or '..' (the name of the Duckiebot, e.g. --robot autobot01)"
+        )
+    if len(robot) > MAX_ROBOT_NAME:
+        raise CalibrationFileError(
+            f"robot name {robot[:20]}... has {len(robot)} characters; at most {MAX_ROBOT_NAME} (a hostname) are "
+            "allowed, so that the file, its backup and their temporary names fit the filesystem: pass a "
+            "shorter --robot NAME"
+        )
+    if robot.lower().endswith(REJECTED_SUFFIX):
+        raise CalibrationFileError(
+            f"--robot {robot}: names ending in {REJECTED_SUFFIX!r} are kept for refused calibrations "
+            f"(NAME{REJECTED_SUFFIX}.yaml); pass the robot's own name"
         )
     return robot
 
@@ -517,25 +535,32 @@ def _write(path: Path, doc: dict, backup: bool = True) -> Path:
                                    "Check that the folder exists and is writable") from e
 
 
-def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str) -> Path:
+def _target(path: Path, rejected: bool) -> Path:
+    """``NAME.yaml``, or ``NAME.rejected.yaml`` beside it for a calibration kept against the kit's doubts."""
+    return path.with_name(path.stem + REJECTED_SUFFIX + path.suffix) if rejected else path
+
+
+def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """Write ``out_dir/camera_intrinsic/<robot>.yaml`` atomically (previous one kept as ``.bak``).
 
-    Refuses ``robot == "default"``: the factory file is never overwritten.
+    Refuses ``robot == "default"``: the factory file is never overwritten. ``rejected``
+    writes ``<robot>.rejected.yaml`` instead, leaving ``<robot>.yaml`` alone.
     """
     check_robot_name(robot)
     if not isinstance(calib, IntrinsicCalibration):
         raise CalibrationFileError(f"save_intrinsics needs an IntrinsicCalibration, got {type(calib).__name__}")
-    return _write(intrinsic_path(out_dir, robot), calib.to_dict())
+    return _write(_target(intrinsic_path(out_dir, robot), rejected), calib.to_dict())
 
 
-def save_extrinsics(H, out_dir, robot: str) -> Path:
+def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """Write ``out_dir/camera_extrinsic/<robot>.yaml`` (``homography: [9 floats]``) atomically.
 
     ``H`` (3, 3) maps rectified pixels to ground metres; it is validated (finite,
     non-singular, not corrupt) before anything is written. Refuses ``robot == "default"``.
+    ``rejected`` writes ``<robot>.rejected.yaml`` instead, leaving ``<robot>.yaml`` alone.
     """
     check_robot_name(robot)
-    path = extrinsic_path(out_dir, robot)
+    path = _target(extrinsic_path(out_dir, robot), rejected)
     H = validate_homography(H, f"{path} (not written)")
     return _write(path, {"homography": [_plain(v) for v in H.ravel()]})
 
