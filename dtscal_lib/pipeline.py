@@ -329,7 +329,7 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
                            doubts=ground_homography_doubts(res.H, camera.P[:, :3]))
         if run.doubts:
             run.path = _refuse_or_keep(run.doubts, "extrinsic", robot_name, out_dir, keep_anyway,
-                                       lambda rejected: calib_files.save_extrinsics(res.H, out_dir, robot_name,
+                                       lambda rejected, H=res.H: calib_files.save_extrinsics(H, out_dir, robot_name,
                                                                                     rejected=rejected))
         elif out_dir is not None:
             run.path = calib_files.save_extrinsics(res.H, out_dir, robot_name)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .calibration import CalibrationResult, board_normal_spread
 
-__all__ = ["INTRINSIC_LIMITS", "intrinsic_doubts", "distinct_board_images"]
+__all__ = ["INTRINSIC_LIMITS", "distinct_board_images", "intrinsic_doubts"]
 
 INTRINSIC_LIMITS = {
     # reprojection RMS, pixels: ROS calls well under 0.5 px good; beyond 1 px a corner or the model is wrong

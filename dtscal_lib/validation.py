@@ -23,8 +23,8 @@ import numpy as np
 from .boards import Board, parse_board
 from .errors import DtscalError
 
-__all__ = ["check_board", "check_image_size", "check_seed", "check_output_folder", "parse_board",
-           "MIN_CORNERS", "MAX_CORNERS", "SQUARE_RANGE_M", "IMAGE_SIDE_RANGE"]
+__all__ = ["IMAGE_SIDE_RANGE", "MAX_CORNERS", "MIN_CORNERS", "SQUARE_RANGE_M", "check_board", "check_image_size",
+           "check_output_folder", "check_seed", "parse_board"]
 
 #: OpenCV's chessboard detector needs more than 2 inner corners per side
 MIN_CORNERS = 3
