@@ -42,7 +42,9 @@ import math
 import os
 import re
 import shutil
+import stat
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -485,12 +487,73 @@ def _dump(doc: dict) -> str:
     return yaml.safe_dump(doc, default_flow_style=None, sort_keys=False, width=4096)
 
 
+#: a temporary file of the kit older than this (seconds) belongs to a killed writer
+STALE_TMP_SECONDS = 300
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where Linux allows."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: the classic read-and-restore
+    os.umask(mask)
+    return mask
+
+
+def _take_rights(fd: int, path: Path) -> None:
+    """Give the new file ``path``'s mode (and owner, where allowed), or the umask's mode if it is new.
+
+    ``mkstemp`` creates 0600; a calibration replaced on a shared robot or course folder must stay
+    readable by whoever could read it before.
+    """
+    try:
+        st = os.stat(path)
+    except OSError:
+        os.fchmod(fd, 0o666 & ~_umask())
+        return
+    os.fchmod(fd, stat.S_IMODE(st.st_mode))
+    if hasattr(os, "fchown") and (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
+        try:
+            os.fchown(fd, st.st_uid, st.st_gid)
+        except OSError:  # only root may give files away; the mode is kept all the same
+            pass
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Remove temporary files a killed writer of ``path`` left (``.NAME[.bak].XXXXXXXX.tmp``)."""
+    pattern = re.compile(r"\." + re.escape(path.name) + r"(\.bak)?\.[a-z0-9_]{8}\.tmp")
+    now = time.time()
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return
+    for e in entries:
+        if pattern.fullmatch(e.name):
+            try:
+                old = now - e.stat(follow_symlinks=False).st_mtime > STALE_TMP_SECONDS
+                if old and e.is_file(follow_symlinks=False):
+                    os.unlink(e.path)
+            except OSError:
+                pass
+
+
 def _atomic_write(path: Path, text: str, *, backup: bool = True) -> Path:
-    """Write ``text`` to ``path`` atomically; keep the previous file as ``path.bak``."""
+    """Write ``text`` to ``path`` atomically; keep the previous file as ``path.bak``.
+
+    The new file keeps the previous file's mode (a new one follows the umask), and stale
+    temporary files of earlier, killed writes are removed.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
+            _take_rights(f.fileno(), path)
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
