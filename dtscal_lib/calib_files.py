@@ -89,8 +89,8 @@ def check_robot_name(robot: str) -> str:
         raise CalibrationFileError(f"robot name must be a non-empty string, got {robot!r}; pass --robot NAME")
     if robot.lower() == dt.DEFAULT_NAME:  # default.yaml, also on a case-insensitive filesystem
         raise CalibrationFileError(
-            f"--robot {robot}: default.yaml is the factory calibration and is never overwritten (names are "
-            "compared ignoring case); pass --robot NAME"
+            f"--robot {robot}: default.yaml is the factory calibration and is never overwritten; pass --robot NAME "
+            "(robot names are compared ignoring case)"
         )
     if not _ROBOT_NAME.fullmatch(robot) or ".." in robot:
         raise CalibrationFileError(
