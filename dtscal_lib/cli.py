@@ -30,9 +30,9 @@ _FLAG_WORDING = {"topic=": "--topic", "image_size=": "image size", "keep_anyway=
 
 
 def _board(args):
-    from .validation import check_board, parse_board
+    from .validation import board_from_flags
 
-    return check_board(parse_board(args.board, args.square))
+    return board_from_flags(args.board, args.square)
 
 
 def _cli_wording(message: str) -> str:

@@ -5,7 +5,7 @@ these first, so that a mistyped option costs a clear message instead of a traceb
 or a wrong calibration, after minutes of frame decoding. Each message names the
 command-line flag and the library argument, says what was wrong and what to give.
 
->>> check_board(parse_board("7x5", 0.031)).describe()
+>>> board_from_flags("7x5", 0.031).describe()
 '7x5 inner corners, 0.031 squares'
 >>> check_image_size((640, 480))
 (640, 480)
@@ -23,8 +23,8 @@ import numpy as np
 from .boards import Board, parse_board
 from .errors import DtscalError
 
-__all__ = ["IMAGE_SIDE_RANGE", "MAX_CORNERS", "MIN_CORNERS", "SQUARE_RANGE_M", "check_board", "check_image_size",
-           "check_output_folder", "check_seed", "parse_board"]
+__all__ = ["IMAGE_SIDE_RANGE", "MAX_CORNERS", "MIN_CORNERS", "SQUARE_RANGE_M", "board_from_flags", "check_board",
+           "check_image_size", "check_output_folder", "check_seed", "parse_board"]
 
 #: OpenCV's chessboard detector needs more than 2 inner corners per side
 MIN_CORNERS = 3
@@ -63,6 +63,21 @@ def check_board(board: Board) -> Board:
             "(Duckietown's board has 0.031 m squares); measure one square of the printed board"
         )
     return board
+
+
+def board_from_flags(spec: str, square: float) -> Board:
+    """The board of ``--board CxR --square S``, checked (:func:`check_board`); messages name the flags."""
+    lo, hi = SQUARE_RANGE_M
+    if not (isinstance(square, (int, float)) and np.isfinite(square) and lo <= square <= hi):
+        raise DtscalError(
+            f"--square {square!r}: the square size is in metres and must be between {lo:g} and {hi:g} "
+            "(Duckietown's board has 0.031 m squares); measure one square of the printed board"
+        )
+    try:
+        board = parse_board(spec, square)
+    except DtscalError as e:
+        raise DtscalError(f"--board {spec}: {e}") from None
+    return check_board(board)
 
 
 def check_image_size(size, *, name: str = "image_size", hint: str = "") -> tuple[int, int]:
