@@ -227,6 +227,22 @@ def test_output_folder_read_only_is_refused_before_work():
         assert list(ro.iterdir()) == []
 
 
+def test_cli_out_read_only_folder_exit_2():
+    """``dtscal synth --out`` and ``calibrate-intrinsics --out`` on a read-only folder, run as ``nobody``."""
+    from dtscal_lib.cli import main
+
+    with shared_tmp() as d:
+        ro = d / "ro"
+        ro.mkdir()
+        os.chmod(ro, 0o555)
+        ok, code = run_unprivileged(main, ["synth", "--out", str(ro / "data"), "-q"])
+        assert ok and code == "2", code
+        ok, code = run_unprivileged(main, ["calibrate-intrinsics", "--source", str(INTRINSIC_BAG), "--out", str(ro),
+                                           "-q"])
+        assert ok and code == "2", code
+        assert list(ro.iterdir()) == []
+
+
 def test_check_seed():
     assert check_seed(None) is None and check_seed(0) == 0 and check_seed(2**63 - 1) == 2**63 - 1
     for bad in (-1, 2**63, True, 1.5, "3"):
