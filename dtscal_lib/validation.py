@@ -98,6 +98,8 @@ def check_image_size(size, *, name: str = "image_size", hint: str = "") -> tuple
             ok = bool(np.isfinite(v)) and float(v).is_integer()
         if not ok:
             raise DtscalError(f"{name} must be two whole numbers of pixels (width, height), got {size!r}")
+        if int(v) <= 0:
+            raise DtscalError(f"{name} must be positive (width, height) in pixels, got {size!r}" + hint)
         if not lo <= int(v) <= hi:
             raise DtscalError(
                 f"{name} {size!r}: each side must be {lo} to {hi} pixels (a Duckiebot camera gives 640x480)"
