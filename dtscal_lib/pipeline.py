@@ -246,7 +246,8 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         tally.rejected["outlier_view"] += len(dropped)
     run = IntrinsicRun(result, robot_name, tally, len(obj) - len(dropped), tracker.bars(), src.describe())
     calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
-    run.doubts = intrinsic_doubts(result, [p for i, p in enumerate(imgp) if i not in set(dropped)])
+    gone = set(dropped)
+    run.doubts = intrinsic_doubts(result, [p for i, p in enumerate(imgp) if i not in gone])
     if run.doubts:
         run.path = _refuse_or_keep(run.doubts, "intrinsic", robot_name, out_dir, keep_anyway,
                                    lambda rejected: calib_files.save_intrinsics(calib, out_dir, robot_name,
