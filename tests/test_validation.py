@@ -81,7 +81,8 @@ def test_board_and_square_refused_before_work_extrinsics(calibrations, flags, wo
 
 def check_board_flags(calibrations, command, flags, words):
     before = snapshot(calibrations)
-    extra = ["--intrinsics", calibrations / "camera_intrinsic" / "default.yaml"] if command.endswith("extrinsics") else []
+    default = calibrations / "camera_intrinsic" / "default.yaml"
+    extra = ["--intrinsics", default] if command.endswith("extrinsics") else []
     p = dtscal(command, "--source", INTRINSIC_BAG, "--out", calibrations, "-q", *extra, *flags)
     refused(p, *words)
     assert snapshot(calibrations) == before
