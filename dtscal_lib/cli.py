@@ -26,7 +26,7 @@ from .errors import DtscalError, ImplausibleCalibrationError
 #: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
 EXIT_REFUSED = 3
 #: library keyword spellings in messages -> the flags of this command
-_FLAG_WORDING = {"topic=": "--topic", "image_size=": "image size", "keep_anyway=True": "--keep-anyway"}
+_FLAG_WORDING = {"topic=": "--topic", "keep_anyway=True": "--keep-anyway"}
 
 
 def _board(args):
