@@ -191,10 +191,10 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         :class:`~dtscal_lib.errors.ImplausibleCalibrationError` (``<robot>.yaml`` is never replaced by it)
     """
     check_board(board)
-    if out_dir is not None:
-        check_output_folder(out_dir)
     src = open_source(source_spec, topic=topic)
     robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
+    if out_dir is not None:
+        check_output_folder(out_dir)
     tally = FrameTally()
     tracker: CoverageTracker | None = None
     stills_obj: list[np.ndarray] = []
@@ -302,14 +302,14 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
     from .ground import camera_pose_from_homography, ground_homography_doubts
 
     check_board(board)
-    if out_dir is not None:
-        check_output_folder(out_dir)
     calib = calib_files.load_intrinsics(intrinsics_file)
     check_image_size(calib.size, name=f"{intrinsics_file}: image_width x image_height",
                      hint="; give the intrinsic file of the camera that took these frames (--intrinsics)")
     camera = calib.camera()
     src = open_source(source_spec, topic=topic)
     robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
+    if out_dir is not None:
+        check_output_folder(out_dir)
     tally = FrameTally()
     frames = progress(src) if progress else src
     last_error = None
