@@ -511,6 +511,8 @@ def _take_rights(fd: int, path: Path) -> None:
     ``mkstemp`` creates 0600; a calibration replaced on a shared robot or course folder must stay
     readable by whoever could read it before.
     """
+    if not hasattr(os, "fchmod"):  # not POSIX: the platform's defaults apply
+        return
     try:
         st = os.stat(path)
     except OSError:
