@@ -57,9 +57,10 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .camera import CameraModel, as_K, as_points, as_size, project_points
+from .camera import CameraModel, as_K, as_points, project_points
 from .errors import CalibrationError, DtscalError
 from .homography import estimate_homography
+from .validation import check_image_size
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
 
@@ -75,6 +76,10 @@ _PARALLEL_VIEWS_TOL = 2e-3
 MIN_TILT_SPREAD_DEG = 3.0
 #: a focal length whose standard deviation exceeds this fraction of it is not determined
 MAX_RELATIVE_FOCAL_STD = 0.25
+#: the extent of a view's object points, in their unit: a board, not an atom or a planet
+OBJECT_EXTENT_RANGE = (1e-6, 1e6)
+#: image points may lie this fraction of the image size outside it (a detector never does)
+IMAGE_SLACK = 0.25
 
 
 # =========================================================================== result
@@ -150,7 +155,10 @@ def _check_views(object_points, image_points, image_size):
     img : list of (N_i, 2) float64 pixels
     size : (width, height)
     """
-    w, h = as_size(image_size, name="image_size", error=CalibrationError)
+    try:
+        w, h = check_image_size(image_size, name="image_size")
+    except DtscalError as e:
+        raise CalibrationError(str(e)) from None
     if isinstance(object_points, np.ndarray) and object_points.ndim == 2:
         raise CalibrationError(
             "object_points must be a sequence of views (one (N, 3) array per view), got a single "
@@ -199,6 +207,20 @@ def _check_views(object_points, image_points, image_size):
                     "board coordinates (x, y, 0) or (N, 2) points in the board plane."
                 )
             o = o[:, :2]
+        extent = float(np.ptp(o, axis=0).max())
+        if not OBJECT_EXTENT_RANGE[0] <= extent <= OBJECT_EXTENT_RANGE[1]:
+            raise CalibrationError(
+                f"the object points of view {i} span {extent:.3g} units; a calibration target spans "
+                f"{OBJECT_EXTENT_RANGE[0]:g} to {OBJECT_EXTENT_RANGE[1]:g} of its unit (metres, millimetres, "
+                "squares): give the board's coordinates in one such unit"
+            )
+        outside = ~np.all((p >= -IMAGE_SLACK * np.array([w, h])) & (p <= (1 + IMAGE_SLACK) * np.array([w, h])), axis=1)
+        if outside.any():
+            raise CalibrationError(
+                f"{int(outside.sum())} image point(s) of view {i} lie far outside the {w}x{h} image (e.g. "
+                f"{p[outside][0].tolist()}); image_size must be the (width, height) of the frames the corners "
+                "were found in, and image points are pixels of those frames"
+            )
         if _line_spread(o) < 1e-9:
             raise CalibrationError(
                 f"the object points of view {i} are collinear (or all the same point); a planar "
@@ -239,6 +261,15 @@ def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray
     The kit's one implementation is :func:`dtscal_lib.homography.estimate_homography`.
     """
     return estimate_homography(plane_points, pixels)
+
+
+def _null_vector(A: np.ndarray) -> np.ndarray:
+    """Unit right singular vector of the smallest singular value of ``A`` (m, n).
+
+    Only the thin SVD is computed when ``m >= n``: the full one would build an
+    (m, m) matrix of left singular vectors, quadratic in the number of views or points.
+    """
+    return np.linalg.svd(A, full_matrices=A.shape[0] < A.shape[1])[2][-1]
 
 
 def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:
@@ -329,7 +360,7 @@ def zhang_closed_form(homographies, image_size, *, skew: bool = True) -> np.ndar
     """
     size = (int(image_size[0]), int(image_size[1]))
     V = _constraint_matrix(homographies, size, skew)
-    b = np.linalg.svd(V)[2][-1]
+    b = _null_vector(V)
     Kn = _intrinsics_from_b(b)
     if Kn is None:
         return None

@@ -9,7 +9,9 @@ Sub-commands::
     dtscal handout OUT             write the student hand-out (alias: dtscal release OUT)
     dtscal release --check|--execute  check notebooks/ against solutions/ / re-run solutions, regenerate
 
-Exit codes: 0 success, 1 a check failed, 2 bad input (the message says what to do).
+Exit codes: 0 success, 1 a check failed, 2 bad input (the message says what to do), 3 a calibration
+was computed but refused as implausible (nothing written over the robot's file; with --keep-anyway it
+is kept as NAME.rejected.yaml beside it), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -20,13 +22,37 @@ import os
 import sys
 from pathlib import Path
 
-from .errors import DtscalError
+from .errors import DtscalError, ImplausibleCalibrationError
+
+#: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
+EXIT_REFUSED = 3
+#: library keyword spellings in messages -> the flags of this command
+_FLAG_WORDING = {"topic=": "--topic", "keep_anyway=True": "--keep-anyway"}
 
 
 def _board(args):
-    from .boards import parse_board
+    from .validation import board_from_flags
 
-    return parse_board(args.board, args.square)
+    return board_from_flags(args.board, args.square)
+
+
+def _cli_wording(message: str) -> str:
+    """The library names its keyword arguments (``topic=``); on the command line they are flags."""
+    for word, flag in _FLAG_WORDING.items():
+        message = message.replace(word, flag)
+    return message
+
+
+def _report_doubts(run) -> int:
+    """Exit code of a finished run: 0, or EXIT_REFUSED when the result was kept against the kit's doubts."""
+    if not run.doubts:
+        return 0
+    print("dtscal: warning: the kit does not believe this calibration:", file=sys.stderr)
+    for d in run.doubts:
+        print(f"  - {d}", file=sys.stderr)
+    where = f"kept as {run.path}" if run.path else "nothing written (--no-write)"
+    print(f"dtscal: --keep-anyway: {where}; the robot's own file is unchanged", file=sys.stderr)
+    return EXIT_REFUSED
 
 
 def _progress(enabled: bool, desc: str):
@@ -55,7 +81,7 @@ def cmd_calibrate_intrinsics(args) -> int:
 
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
-                               progress=_progress(not args.quiet, "frames"))
+                               progress=_progress(not args.quiet, "frames"), keep_anyway=args.keep_anyway)
     if args.json:
         _print_json(run.to_dict())
     else:
@@ -71,7 +97,7 @@ def cmd_calibrate_intrinsics(args) -> int:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
             print(f"wrote {run.path}")
-    return 0
+    return _report_doubts(run)
 
 
 def cmd_calibrate_extrinsics(args) -> int:
@@ -79,7 +105,7 @@ def cmd_calibrate_extrinsics(args) -> int:
 
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
                                out_dir=None if args.no_write else args.out, topic=args.topic,
-                               progress=_progress(not args.quiet, "frames"))
+                               progress=_progress(not args.quiet, "frames"), keep_anyway=args.keep_anyway)
     if args.json:
         _print_json(run.to_dict())
     else:
@@ -89,15 +115,25 @@ def cmd_calibrate_extrinsics(args) -> int:
         x, y = run.image_center_ground
         print(f"  image centre -> ground ({x:.3f}, {y:.3f}) m; corner residuals max "
               f"{run.residual_mm.max():.2f} mm")
+        if run.camera_pose:
+            print(f"  camera {run.camera_pose['height_m']:.3f} m above the ground, looking "
+                  f"{run.camera_pose['pitch_down_deg']:.1f} degrees down")
         if run.path:
             print(f"wrote {run.path}")
-    return 0
+    return _report_doubts(run)
 
 
 def cmd_synth(args) -> int:
     from .synth import generate
+    from .validation import check_output_folder, check_seed
 
-    paths = generate(Path(args.out), seed=args.seed, progress=not args.quiet)
+    seed = check_seed(args.seed)
+    out = check_output_folder(args.out)
+    try:
+        paths = generate(out, seed=seed, progress=not args.quiet)
+    except OSError as e:
+        raise DtscalError(f"--out {args.out}: writing the session failed ({e}); free space or choose another "
+                          "folder") from None
     for p in (paths.values() if isinstance(paths, dict) else paths):
         print(p)
     return 0
@@ -166,6 +202,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--no-write", action="store_true", help="compute only, write no file")
         sp.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
         sp.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+        sp.add_argument("--keep-anyway", action="store_true",
+                        help="keep a result the kit finds implausible as NAME.rejected.yaml beside the robot's file "
+                             "(exit code 3 still says it was refused)")
         board_args(sp)
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
@@ -216,8 +255,11 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except ImplausibleCalibrationError as exc:
+        print(f"dtscal: error: {_cli_wording(str(exc))}", file=sys.stderr)
+        return EXIT_REFUSED
     except DtscalError as exc:
-        print(f"dtscal: error: {exc}", file=sys.stderr)
+        print(f"dtscal: error: {_cli_wording(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("dtscal: interrupted", file=sys.stderr)

@@ -36,3 +36,14 @@ class FrameError(DtscalError):
         super().__init__(message)
         #: short machine-readable reason, used as a key in rejection counts
         self.reason = reason
+
+
+class ImplausibleCalibrationError(CalibrationError):
+    """A calibration was computed but the kit does not believe it; nothing was written over the robot's file.
+
+    ``doubts`` lists the reasons (each says what to do). ``dtscal`` exits with code 3.
+    """
+
+    def __init__(self, message: str, doubts: list[str]):
+        super().__init__(message)
+        self.doubts = list(doubts)

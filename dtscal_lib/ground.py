@@ -276,6 +276,81 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
     return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground)
 
 
+# --------------------------------------------------------------------------- plausibility
+#: what a ground homography must say about the camera that looks at the ground in front of a robot
+GROUND_CAMERA_LIMITS = {"height_m": (0.03, 0.5), "pitch_down_deg": (2.0, 75.0), "abs_yaw_deg": 30.0,
+                        "axis_ratio": 1.15, "axis_angle_error_deg": 8.0}
+
+
+def camera_pose_from_homography(H, K) -> dict:
+    """The camera's pose over the ground, recovered from a ground homography and ``K``.
+
+    ``H`` maps rectified pixels to ground metres, so ``K^-1 H^-1 ~ [r1 r2 t]`` (the seed's
+    eq. (13) read backwards): ``r1``, ``r2`` are the ground's x and y axes in the camera
+    frame and ``t`` the robot origin. ``K`` (3, 3) is the rectified camera matrix (``P[:, :3]``).
+
+    Returns
+    -------
+    dict with ``height_m`` (camera centre above the ground), ``position_m`` (x, y of the
+    camera centre on the ground), ``pitch_down_deg`` (optical axis below the horizon),
+    ``yaw_deg`` (optical axis left of the robot's x axis), ``axis_ratio`` (|r1| / |r2|, 1
+    for a true plane view) and ``axis_angle_deg`` (angle between r1 and r2, 90 for one).
+    """
+    M = np.linalg.solve(np.asarray(K, dtype=np.float64)[:3, :3], np.linalg.inv(_homography(H)))
+    lam = 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
+    if (GROUND_NEAR_ROW_X * r1 + t)[2] < 0:  # the board must be in front of the camera
+        r1, r2, t = -r1, -r2, -t
+    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    R = U @ Wt
+    centre, axis = -R.T @ t, R[2]  # camera centre and optical axis in the robot frame (z up)
+    cosang = float(r1 @ r2 / (np.linalg.norm(r1) * np.linalg.norm(r2)))
+    return {"height_m": float(centre[2]), "position_m": [float(centre[0]), float(centre[1])],
+            "pitch_down_deg": float(np.degrees(np.arcsin(np.clip(-axis[2], -1, 1)))),
+            "yaw_deg": float(np.degrees(np.arctan2(axis[1], axis[0]))),
+            "axis_ratio": float(np.linalg.norm(r1) / np.linalg.norm(r2)),
+            "axis_angle_deg": float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))}
+
+
+def ground_homography_doubts(H, K) -> list[str]:
+    """Reasons to disbelieve that ``H`` shows a robot's camera looking down at the ground ahead.
+
+    Checks Duckietown's ``H[1][2] <= 0`` rule and the pose of :func:`camera_pose_from_homography`
+    against :data:`GROUND_CAMERA_LIMITS`. An empty list means plausible.
+
+    >>> from dtscal_lib import duckietown as dt
+    >>> from dtscal_lib.camera import CameraModel
+    >>> cam = CameraModel(dt.default_K(), dt.default_dist(), dt.IMAGE_SIZE)
+    >>> ground_homography_doubts(np.reshape(dt.DEFAULT_HOMOGRAPHY, (3, 3)), cam.P[:, :3])
+    []
+    """
+    H = _homography(H)
+    lim = GROUND_CAMERA_LIMITS
+    out = []
+    if dt.homography_is_corrupt(H):
+        out.append(f"H[1][2] = {H[1, 2]:.3g} > 0, which Duckietown rejects as corrupt (mirrored or mis-ordered board)")
+    pose = camera_pose_from_homography(H, K)
+    lo, hi = lim["height_m"]
+    if not lo <= pose["height_m"] <= hi:
+        out.append(f"the camera would be {pose['height_m']:.3f} m above the ground (a robot's camera: {lo}-{hi} m)")
+    lo, hi = lim["pitch_down_deg"]
+    if not lo <= pose["pitch_down_deg"] <= hi:
+        out.append(f"the camera would look {pose['pitch_down_deg']:.1f} degrees below the horizon "
+                   f"(looking down at the ground ahead: {lo:g}-{hi:g})")
+    if abs(pose["yaw_deg"]) > lim["abs_yaw_deg"]:
+        out.append(f"the camera would look {pose['yaw_deg']:.0f} degrees to the side of the robot's forward "
+                   f"axis (at most {lim['abs_yaw_deg']:g})")
+    if pose["position_m"][0] >= GROUND_NEAR_ROW_X:
+        out.append(f"the camera would stand {pose['position_m'][0]:.3f} m ahead of the axle, on or beyond the "
+                   f"board (its near row is at {GROUND_NEAR_ROW_X} m)")
+    ratio = max(pose["axis_ratio"], 1 / pose["axis_ratio"])
+    if ratio > lim["axis_ratio"] or abs(pose["axis_angle_deg"] - 90) > lim["axis_angle_error_deg"]:
+        out.append(f"the homography is not a view of a flat ground through this camera (ground axes scaled "
+                   f"{ratio:.2f}:1 and {pose['axis_angle_deg']:.0f} degrees apart; expected 1:1 and 90): "
+                   "wrong intrinsics, or the board was not lying flat")
+    return out
+
+
 # --------------------------------------------------------------------------- views
 def _ground_to_view(x_range, y_range, px_per_m) -> tuple[np.ndarray, tuple[int, int]]:
     """Affine map ground metres -> bird's-eye pixel (x forward = up, y left = left), and (w, h)."""

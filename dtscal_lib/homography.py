@@ -104,7 +104,7 @@ def estimate_homography(src, dst) -> np.ndarray:
     A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
     A[1::2, 3:5], A[1::2, 5] = a, 1.0
     A[1::2, 6:8], A[1::2, 8] = -b[:, 1:2] * a, -b[:, 1]
-    Hn = np.linalg.svd(A)[2][-1].reshape(3, 3)
+    Hn = np.linalg.svd(A, full_matrices=len(A) < 9)[2][-1].reshape(3, 3)
     H = np.linalg.solve(Tb, Hn @ Ta)
     return H / H[2, 2] if abs(H[2, 2]) > 1e-12 * np.abs(H).max() else H / np.linalg.norm(H)
 

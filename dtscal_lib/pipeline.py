@@ -23,8 +23,10 @@ from .boards import DUCKIETOWN_BOARD, Board
 from .calibration import CalibrationResult, calibrate
 from .coverage import CoverageTracker
 from .detect import detect_board
-from .errors import CalibrationError, DtscalError
+from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError
+from .plausibility import intrinsic_doubts
 from .sources import Frame, open_source
+from .validation import check_board, check_image_size, check_output_folder
 
 #: fewer samples than this cannot give a trustworthy calibration
 MIN_SAMPLES = 3
@@ -125,6 +127,23 @@ def _robot_name(robot: str | None, source) -> str:
     )
 
 
+def _refuse_or_keep(doubts: list[str], kind: str, robot: str, out_dir, keep_anyway: bool, write) -> Path | None:
+    """Refuse a calibration the kit does not believe, or (``keep_anyway``) write it as ``ROBOT.rejected.yaml``.
+
+    ``write(rejected: bool) -> Path`` writes the file. Returns the path of the kept file
+    (or ``None`` when nothing is written); raises :class:`ImplausibleCalibrationError` otherwise.
+    """
+    if keep_anyway:
+        return write(True) if out_dir is not None else None
+    listed = "".join(f"\n  - {d}" for d in doubts)
+    where = f"camera_{kind}/{robot}.yaml"
+    raise ImplausibleCalibrationError(
+        f"refusing to write {where}: the kit does not believe this {kind} calibration:{listed}\n"
+        f"Nothing was written; the previous {where} (if any) is unchanged. Record again as described, or, as an "
+        f"expert, rerun with keep_anyway=True to keep the result as camera_{kind}/{robot}"
+        f"{calib_files.REJECTED_SUFFIX}.yaml beside it", doubts)
+
+
 @dataclass
 class IntrinsicRun:
     result: CalibrationResult
@@ -134,6 +153,8 @@ class IntrinsicRun:
     bars: list
     source: str
     path: Path | None = None
+    #: why the kit does not believe the result (kept with keep_anyway); empty when plausible
+    doubts: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = self.result.to_dict()
@@ -144,13 +165,15 @@ class IntrinsicRun:
             frames=self.tally.to_dict(),
             coverage={b.name: round(float(b.progress), 4) for b in self.bars},
             output=str(self.path) if self.path else None,
+            doubts=list(self.doubts),
         )
         return out
 
 
 def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model: str = "plumb_bob",
                          skew: bool = False, robot: str | None = None, out_dir=None, topic: str | None = None,
-                         progress: Callable[[Iterable], Iterable] | None = None) -> IntrinsicRun:
+                         progress: Callable[[Iterable], Iterable] | None = None,
+                         keep_anyway: bool = False) -> IntrinsicRun:
     """Detect the board in every frame of a source, select samples, calibrate, write the YAML.
 
     Streams (bags, videos) use ROS's coverage rule: a detection becomes a sample only when
@@ -163,10 +186,16 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     out_dir : the ``calibrations`` folder; ``out_dir/camera_intrinsic/<robot>.yaml`` is written.
         ``None`` writes nothing.
     progress : optional wrapper around the frame iterator (e.g. tqdm)
+    keep_anyway : when the result fails :func:`~dtscal_lib.plausibility.intrinsic_doubts`, write it as
+        ``<robot>.rejected.yaml`` and return it with ``run.doubts`` instead of raising
+        :class:`~dtscal_lib.errors.ImplausibleCalibrationError` (``<robot>.yaml`` is never replaced by it)
     """
+    check_board(board)
     src = open_source(source_spec, topic=topic)
     robot_name = (_robot_name(robot, src) if out_dir is not None
                   else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
+    if out_dir is not None:
+        check_output_folder(out_dir)
     tally = FrameTally()
     tracker: CoverageTracker | None = None
     stills_obj: list[np.ndarray] = []
@@ -217,8 +246,14 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         tally.used -= len(dropped)
         tally.rejected["outlier_view"] += len(dropped)
     run = IntrinsicRun(result, robot_name, tally, len(obj) - len(dropped), tracker.bars(), src.describe())
-    if out_dir is not None:
-        calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
+    calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
+    gone = set(dropped)
+    run.doubts = intrinsic_doubts(result, [p for i, p in enumerate(imgp) if i not in gone])
+    if run.doubts:
+        run.path = _refuse_or_keep(run.doubts, "intrinsic", robot_name, out_dir, keep_anyway,
+                                   lambda rejected: calib_files.save_intrinsics(calib, out_dir, robot_name,
+                                                                                rejected=rejected))
+    elif out_dir is not None:
         run.path = calib_files.save_intrinsics(calib, out_dir, robot_name)
     return run
 
@@ -233,6 +268,10 @@ class ExtrinsicRun:
     image_center_ground: np.ndarray
     source: str
     path: Path | None = None
+    #: the camera's height and pitch recovered from H (:func:`~dtscal_lib.ground.camera_pose_from_homography`)
+    camera_pose: dict = field(default_factory=dict)
+    #: why the kit does not believe the homography (kept with keep_anyway); empty when plausible
+    doubts: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {
@@ -244,25 +283,35 @@ class ExtrinsicRun:
             "corner_residual_mm": {"max": float(np.max(self.residual_mm)), "mean": float(np.mean(self.residual_mm))},
             "frames": self.tally.to_dict(),
             "output": str(self.path) if self.path else None,
+            "camera_pose": dict(self.camera_pose),
+            "doubts": list(self.doubts),
         }
 
 
 def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIETOWN_BOARD,
                          robot: str | None = None, out_dir=None, topic: str | None = None,
-                         progress=None) -> ExtrinsicRun:
+                         progress=None, keep_anyway: bool = False) -> ExtrinsicRun:
     """Duckietown's extrinsic procedure on the first usable frame of a source.
 
     ``intrinsics_file`` is a Duckietown intrinsic YAML; the homography maps pixels of the
     image rectified with that file's ``P`` to ground metres (robot frame: x forward,
-    y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given.
+    y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given, if the
+    homography describes a camera looking down at the ground ahead
+    (:func:`~dtscal_lib.ground.ground_homography_doubts`); ``keep_anyway`` as in :func:`calibrate_intrinsics`.
     """
     from .ground import extrinsics_from_image as fit_on_image
+    from .ground import camera_pose_from_homography, ground_homography_doubts
 
+    check_board(board)
     calib = calib_files.load_intrinsics(intrinsics_file)
+    check_image_size(calib.size, name=f"{intrinsics_file}: image_width x image_height",
+                     hint="; give the intrinsic file of the camera that took these frames (--intrinsics)")
     camera = calib.camera()
     src = open_source(source_spec, topic=topic)
     robot_name = (_robot_name(robot, src) if out_dir is not None
                   else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
+    if out_dir is not None:
+        check_output_folder(out_dir)
     tally = FrameTally()
     frames = progress(src) if progress else src
     last_error = None
@@ -273,10 +322,19 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
             tally.reject(getattr(exc, "reason", None) or "no_board")
             last_error = exc
             continue
+        except cv2.error:  # OpenCV choking on one odd frame must not end the run
+            tally.reject("detector_error")
+            continue
         tally.used += 1
         run = ExtrinsicRun(robot_name, res.H, frame.index, tally, np.asarray(res.residual_mm),
-                           np.asarray(res.image_center_ground), src.describe())
-        if out_dir is not None:
+                           np.asarray(res.image_center_ground), src.describe(),
+                           camera_pose=camera_pose_from_homography(res.H, camera.P[:, :3]),
+                           doubts=ground_homography_doubts(res.H, camera.P[:, :3]))
+        if run.doubts:
+            run.path = _refuse_or_keep(run.doubts, "extrinsic", robot_name, out_dir, keep_anyway,
+                                       lambda rejected, H=res.H: calib_files.save_extrinsics(H, out_dir, robot_name,
+                                                                                    rejected=rejected))
+        elif out_dir is not None:
             run.path = calib_files.save_extrinsics(res.H, out_dir, robot_name)
         return run
     raise CalibrationError(
