@@ -94,7 +94,7 @@ class LiveSource:
         self._closed = False
 
     # ------------------------------------------------------------------ public
-    def start(self) -> "LiveSource":
+    def start(self) -> LiveSource:
         """Begin receiving in the background (no-op when already receiving); returns self."""
         if self._closed:
             raise SourceError(f"{self.describe()} was closed; open it again with open_live({self.spec!r})")
@@ -142,7 +142,7 @@ class LiveSource:
     def describe(self) -> str:
         return self.spec
 
-    def __enter__(self) -> "LiveSource":
+    def __enter__(self) -> LiveSource:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -359,7 +359,7 @@ def _ros_probe(py: str) -> str | None:
         else:
             try:
                 r = subprocess.run([py, "-c", "import rospy, sensor_msgs.msg, sensor_msgs.srv"],
-                                   env=_clean_env(DEFAULT_MASTER), capture_output=True, timeout=60)
+                                   env=_clean_env(DEFAULT_MASTER), capture_output=True, timeout=60, check=False)
                 _PROBED[py] = None if r.returncode == 0 else (r.stderr.decode(errors="replace").strip()
                                                               .splitlines() or ["import failed"])[-1]
             except (OSError, subprocess.TimeoutExpired) as exc:
@@ -391,7 +391,7 @@ def run_ros_helper(args: list[str], *, master: str | None = None, stdin: bytes |
     """Run the helper once (e.g. a service call) and return its completed process."""
     py = ros_python()
     return subprocess.run([py, str(HELPER), *args], input=stdin, env=_clean_env(master_uri(master)),
-                          capture_output=True, timeout=timeout)
+                          capture_output=True, timeout=timeout, check=False)
 
 
 def _read_exact(stream, n: int) -> bytes | None:
@@ -490,6 +490,57 @@ class RosLive(LiveSource):
             pass
 
 
+# ---------------------------------------------------------------------- for the command line
+class LiveFrames:
+    """A live source as a finite iterable of frames, for the headless pipeline.
+
+    Yields the newest good frames until ``done()`` is true, ``max_seconds`` have passed, or the
+    source ends or fails; then :attr:`stopped` says why in a sentence and :attr:`bad` counts the
+    frames skipped as corrupt.
+    """
+
+    is_stream = True
+    kind = "live"
+
+    def __init__(self, spec: str, *, topic: str | None = None, max_seconds: float | None = None,
+                 done=None, master_uri: str | None = None):
+        self.spec = spec
+        self.live = open_live(spec, topic=topic, master_uri=master_uri)
+        self.topic = self.live.topic
+        self.max_seconds = max_seconds
+        self.done = done or (lambda: False)
+        self.stopped = ""
+        self.bad: dict = {}
+
+    def describe(self) -> str:
+        return self.live.describe() + (f" ({self.stopped})" if self.stopped else "")
+
+    def __len__(self) -> int:
+        raise TypeError("a live source has no length")
+
+    def __iter__(self):
+        t0 = time.monotonic()
+        after = -1
+        with self.live as cam:
+            while True:
+                if self.done():
+                    self.stopped = "stopped: enough samples"
+                    break
+                if self.max_seconds is not None and time.monotonic() - t0 > self.max_seconds:
+                    self.stopped = f"stopped after {self.max_seconds:g} s (--max-seconds)"
+                    break
+                f = cam.latest(after=after, timeout=0.5)
+                if f is not None:
+                    after = f.index
+                    yield f
+                    continue
+                st = cam.status
+                if st.state in ("ended", "error"):
+                    self.stopped = st.message
+                    break
+            self.bad = cam.status.bad
+
+
 # ---------------------------------------------------------------------- the one entry point
 def is_live_spec(spec) -> bool:
     """True for ``ros:...``, ``device:N`` and URLs: sources that only :func:`open_live` opens."""
@@ -539,5 +590,5 @@ def open_live(spec: str, *, realtime: bool = True, topic: str | None = None, loo
     return RecordingLive(text, realtime=realtime, topic=topic, loop=loop)
 
 
-__all__ = ["LiveSource", "LiveStatus", "RecordingLive", "CaptureLive", "RosLive", "open_live", "is_live_spec",
-           "master_uri", "run_ros_helper", "ros_python"]
+__all__ = ["CaptureLive", "LiveFrames", "LiveSource", "LiveStatus", "RecordingLive", "RosLive", "is_live_spec",
+           "master_uri", "open_live", "ros_python", "run_ros_helper"]

@@ -18,7 +18,6 @@ The subscriber uses ``queue_size=1``: when the reader is slow, ROS drops the old
 
 import json
 import os
-import socket
 import struct
 import sys
 import threading
@@ -86,7 +85,7 @@ def subscribe(topic):
     master = master_proxy()
     while not broken.is_set() and os.getppid() == parent:
         try:
-            code, _msg, state = master.getSystemState("/dtscal_live")
+            _code, _msg, state = master.getSystemState("/dtscal_live")
             publishers = [nodes for name, nodes in state[0] if name == topic]
             n = len(publishers[0]) if publishers else 0
         except (OSError, xmlrpc.client.Error) as exc:
@@ -94,8 +93,8 @@ def subscribe(topic):
                             "Start the robot's ROS again (or check the network) and press Reconnect")
             os._exit(4)
         now = ("running", f"receiving {topic} from {MASTER}") if n else (
-            "waiting", f"nobody publishes {topic} on {MASTER} (the bag ended or the camera node stopped); "
-                       "frames resume when it is back, or press Reconnect")
+            "waiting", (f"nobody publishes {topic} on {MASTER} (the bag ended or the camera node stopped); "
+                        "frames resume when it is back, or press Reconnect"))
         if now != last:
             status(*now)
             last = now
@@ -134,7 +133,7 @@ def set_camera_info(service, timeout):
     try:
         call = rospy.ServiceProxy(service, SetCameraInfo)
         res = call(info)
-    except (rospy.ServiceException, rospy.ROSException, OSError, socket.error) as exc:
+    except (rospy.ServiceException, rospy.ROSException, OSError) as exc:
         return answer(ok=False, kind="call_failed", message=f"calling {service} failed: {exc}")
     return answer(ok=bool(res.success), kind="done" if res.success else "refused", message=res.status_message)
 
