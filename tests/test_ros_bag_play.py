@@ -136,17 +136,12 @@ def roscore(ros_ok, tmp_path_factory):
 
 
 @contextmanager
-def running_roscore(home: Path, port: int | None = None, procs: list | None = None):
-    """Start ``roscore`` on ``port`` (default a free one), wait until it answers, yield the ROS environment.
-
-    ``procs``, when given, receives the roscore process (to kill it mid-test).
-    """
+def running_roscore(home: Path, port: int | None = None):
+    """Start ``roscore`` on ``port`` (default a free one), wait until it answers, yield the ROS environment."""
     port = port or _free_port()
     env = _ros_env(home, port)
     log = home / f"roscore-{port}-{time.time_ns()}.log"
     with _started([_ros_tool("roscore"), "-p", str(port)], env, log) as core:
-        if procs is not None:
-            procs.append(core)
         master = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"])
         deadline = time.time() + 60
         while True:
