@@ -376,10 +376,21 @@ def master_uri(uri: str | None = None) -> str:
 
 
 def _clean_env(uri: str) -> dict[str, str]:
-    """Environment for a ROS process: no venv, no PYTHONPATH; the ROS network variables kept."""
+    """Environment for a ROS process: no venv; the ROS network variables kept.
+
+    Debian's ROS needs nothing else. In a shell where a ROS distribution's ``setup.bash`` was
+    sourced (``ROS_DISTRO`` is set, e.g. a ROS noetic container) its paths are kept too.
+    """
     env = {"PATH": "/usr/bin:/bin:/usr/local/bin", "LANG": "C.UTF-8", "PYTHONUNBUFFERED": "1",
            "ROS_MASTER_URI": uri, "HOME": os.environ.get("HOME") or tempfile.gettempdir()}
-    for k in ("ROS_HOSTNAME", "ROS_IP", "ROS_HOME", "ROS_LOG_DIR"):
+    keep = ["ROS_HOSTNAME", "ROS_IP", "ROS_HOME", "ROS_LOG_DIR"]
+    if os.environ.get("ROS_DISTRO"):
+        keep += ["ROS_DISTRO", "ROS_PACKAGE_PATH", "ROS_ROOT", "ROS_ETC_DIR", "PYTHONPATH", "LD_LIBRARY_PATH",
+                 "CMAKE_PREFIX_PATH"]
+        venv = os.environ.get("VIRTUAL_ENV")
+        env["PATH"] = os.pathsep.join(p for p in os.environ.get("PATH", env["PATH"]).split(os.pathsep)
+                                      if not (venv and p.startswith(venv)))
+    for k in keep:
         if os.environ.get(k):
             env[k] = os.environ[k]
     env.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "dtscal-ros-log"))
