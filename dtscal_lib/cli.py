@@ -55,9 +55,9 @@ def cmd_calibrate_intrinsics(args) -> int:
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
                                progress=_progress(not args.quiet, "frames"), max_seconds=args.max_seconds)
-    committed = _commit(args, run, "intrinsics")
+    committed, failed = _commit(args, run, "intrinsics")
     if args.json:
-        _print_json({**run.to_dict(), "commit": committed})
+        _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
     else:
         r = run.result
         print(f"calibrated {run.robot}: {run.samples} samples from {run.tally.total} frames "
@@ -73,13 +73,24 @@ def cmd_calibrate_intrinsics(args) -> int:
             print(f"wrote {run.path}")
         if committed:
             print(f"committed to {run.robot}: {committed}")
+    if failed:  # after the result is printed: nothing computed is lost
+        raise failed
     return 0
 
 
-def _commit(args, run, kind: str) -> str | None:
-    """--commit: send the written file (or a temporary one with --no-write) to the robot; the reply."""
+def _commit(args, run, kind: str):
+    """--commit: send the written file (or a temporary one with --no-write) to the robot; (reply, CommitError)."""
+    from .robot import CommitError
+
     if not args.commit:
-        return None
+        return None, None
+    try:
+        return _send(args, run, kind), None
+    except CommitError as exc:
+        return None, exc
+
+
+def _send(args, run, kind: str) -> str:
     import tempfile
 
     from . import calib_files, robot
@@ -108,9 +119,9 @@ def cmd_calibrate_extrinsics(args) -> int:
     if args.format != "classic" and not args.no_write:
         run.path = calib_files.save_extrinsics_as(run.H, args.out, run.robot, fmt=args.format,
                                                   intrinsics=args.intrinsics)
-    committed = _commit(args, run, "extrinsics")
+    committed, failed = _commit(args, run, "extrinsics")
     if args.json:
-        _print_json({**run.to_dict(), "commit": committed})
+        _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
     else:
         print(f"ground homography for {run.robot} from frame {run.frame_index} ({run.source}):")
         for row in run.H:
@@ -122,6 +133,8 @@ def cmd_calibrate_extrinsics(args) -> int:
             print(f"wrote {run.path}")
         if committed:
             print(f"committed to {run.robot}: {committed}")
+    if failed:  # after the result is printed: nothing computed is lost
+        raise failed
     return 0
 
 

@@ -328,3 +328,76 @@ def test_commit_extrinsics_without_server_keeps_the_file(tmp_path):
     bad.write_text("nothing: here\n")
     with pytest.raises(CommitError, match="not an extrinsic file"):
         commit_extrinsics("bot1", bad, url="http://127.0.0.1:9/x")
+
+
+# ---------------------------------------------------------------------- a real MJPEG stream over HTTP
+class _Mjpeg(http.server.BaseHTTPRequestHandler):
+    """An IP camera's MJPEG stream: ``frames`` JPEGs as multipart/x-mixed-replace, then the stream ends."""
+
+    frames = 30
+
+    def do_GET(self):  # noqa: N802
+        self.send_response(200)
+        self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=frame")
+        self.end_headers()
+        try:
+            for i in range(self.frames):
+                b = _jpeg(i)
+                self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n\r\n" % len(b))
+                self.wfile.write(b + b"\r\n")
+                time.sleep(1 / 30)
+        except (BrokenPipeError, ConnectionResetError):
+            pass
+
+    def log_message(self, *args):
+        pass
+
+
+def test_mjpeg_stream_url_ends_and_reconnects():
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _Mjpeg)
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{srv.server_address[1]}/video.mjpg"
+    try:
+        with open_live(url) as cam:
+            first = cam.latest(timeout=15)
+            assert first is not None and first.image.shape == (120, 160, 3), cam.status
+            deadline = time.monotonic() + 20
+            while cam.status.state != "ended" and time.monotonic() < deadline:
+                time.sleep(0.05)
+            st = cam.status
+            assert st.state == "ended" and "Reconnect" in st.message and url in st.message
+            assert 20 <= st.frames <= 30, st
+            last = cam.latest(timeout=0)
+            assert last is not None
+            cam.reconnect()
+            again = cam.latest(after=last.index, timeout=15)
+            assert again is not None and again.index > last.index
+    finally:
+        srv.shutdown()
+        srv.server_close()
+
+
+def test_offline_commit_to_a_folder_that_cannot_be_written(tmp_path):
+    """Writing camera_intrinsic/<ROBOT>.yaml fails: a clear error, the previous file intact, saving elsewhere works."""
+    import os
+
+    calib = calib_files.IntrinsicCalibration.from_dict(dt.DEFAULT_INTRINSICS, "default")
+    folder = tmp_path / "calibrations"
+    previous = calib_files.save_intrinsics(calib, folder, "bot1")
+    before = previous.read_bytes()
+    target = folder / "camera_intrinsic"
+    if os.geteuid() == 0:
+        # root ignores permission bits: make the file's place unusable instead (a file where the folder is)
+        blocked = tmp_path / "blocked"
+        blocked.write_text("not a folder")
+        with pytest.raises(CalibrationFileError, match="could not be written"):
+            calib_files.save_intrinsics(calib, blocked, "bot2")
+    target.chmod(0o555)
+    try:
+        if os.geteuid() != 0:
+            with pytest.raises(CalibrationFileError, match="could not be written.*previous file is unchanged"):
+                calib_files.save_intrinsics(calib, folder, "bot1")
+    finally:
+        target.chmod(0o755)
+    assert previous.read_bytes() == before
+    assert calib_files.save_intrinsics(calib, tmp_path / "elsewhere", "bot1").exists()

@@ -36,6 +36,8 @@ from test_ros_bag_play import (  # noqa: F401 (ros_ok and roscore are fixtures)
     running_roscore,
 )
 
+from test_live_sources import file_server  # noqa: F401 (a fixture)
+
 from dtscal_lib import calib_files, datasets
 from dtscal_lib import duckietown as dt
 from dtscal_lib.robot import CommitError, commit_intrinsics
@@ -277,3 +279,50 @@ def test_helper_uses_newest_frame_only(roscore, tmp_path):
     assert min(np.diff(got)) >= 3, got  # frames were skipped, not queued
     assert max(lags) <= 3, lags
     assert Path(bag).exists()
+
+
+def test_cli_extrinsics_from_live_topic_and_upload(roscore, file_server, tmp_path):  # noqa: F811
+    env = roscore
+    base, stored = file_server
+    truth = datasets.load_truth()["camera"]
+    calib = calib_files.IntrinsicCalibration(
+        camera_name=f"/{ROBOT}/camera_node", width=640, height=480, K=np.array(truth["K"]),
+        distortion_model="plumb_bob", D=np.array(truth["dist"]), R=np.eye(3), P=np.array(truth["P"]))
+    intr = calib_files.save_intrinsics(calib, tmp_path / "in", ROBOT)
+    out = tmp_path / "calibrations"
+    url = f"{base}/files/data/config/calibrations/camera_extrinsic/{ROBOT}.yaml"
+    cmd = [sys.executable, "-m", "dtscal_lib.cli", "calibrate-extrinsics", "--source", f"ros:{ROBOT}",
+           "--intrinsics", str(intr), "--out", str(out), "--commit", "--upload-url", url, "--max-seconds", "90",
+           "--json", "-q"]
+    err_log = tmp_path / "cli.err"
+    with err_log.open("wb") as err:
+        cli = subprocess.Popen(cmd, env=_kit_env(env), stdout=subprocess.PIPE, stderr=err, start_new_session=True)
+    try:
+        _wait(lambda: _subscribers(env, TOPIC) > 0 or cli.poll() is not None, 60, "the kit to subscribe")
+        with _started([_ros_tool("rosbag"), "play", "--quiet", "--loop",
+                       str(datasets.session_dir() / "extrinsics.bag")], env, tmp_path / "play.log"):
+            stdout, _ = cli.communicate(timeout=120)
+    finally:
+        if cli.poll() is None:
+            os.killpg(cli.pid, signal.SIGKILL)
+            cli.wait()
+    assert cli.returncode == 0, _log(err_log)
+    run = json.loads(stdout)
+    local = out / "camera_extrinsic" / f"{ROBOT}.yaml"
+    assert run["commit"] == f"uploaded {local} to {url} (HTTP 200)"
+    assert stored[url[len(base):]] == local.read_bytes()
+    assert run["corner_residual_mm"]["max"] < 3.0, run
+
+
+def test_cli_commit_without_service_keeps_the_written_file(roscore, tmp_path):
+    out = tmp_path / "calibrations"
+    cmd = [sys.executable, "-m", "dtscal_lib.cli", "calibrate-intrinsics", "--source",
+           str(datasets.session_dir() / "intrinsics.bag"), "--out", str(out), "--robot", "nobot", "--commit",
+           "--master-uri", roscore["ROS_MASTER_URI"], "--commit-timeout", "2", "-q"]
+    res = subprocess.run(cmd, env=_kit_env(roscore), capture_output=True, text=True, timeout=300, check=False)
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "no service /nobot/camera_node/set_camera_info" in res.stderr and "Traceback" not in res.stderr
+    written = out / "camera_intrinsic" / "nobot.yaml"
+    assert f"{written} is kept" in res.stderr
+    assert "calibrated nobot" in res.stdout and f"wrote {written}" in res.stdout  # the result was printed
+    calib_files.load_intrinsics(written)  # the calibration itself was saved

@@ -267,7 +267,7 @@ class CaptureLive(LiveSource):
 
     def __init__(self, spec: str):
         super().__init__(spec)
-        self.kind = "device" if spec.startswith("device:") else "stream"
+        self.kind = "device" if spec.lower().startswith("device:") else "stream"
         if self.kind == "device":
             text = spec.split(":", 1)[1]
             if not text.strip().isdigit():
@@ -275,8 +275,6 @@ class CaptureLive(LiveSource):
             self.target: int | str = int(text)
         else:
             self.target = spec
-        self._cap = None
-        self._cap_lock = threading.Lock()
 
     def describe(self) -> str:
         return f"camera {self.target}" if self.kind == "device" else f"stream {self.spec}"
@@ -286,31 +284,26 @@ class CaptureLive(LiveSource):
 
         return cv2.VideoCapture(self.target)
 
-    def _halt(self) -> None:
-        with self._cap_lock:
-            cap, self._cap = self._cap, None
-        if cap is not None:
-            try:
-                cap.release()
-            except Exception:
-                pass
-
     def _run(self, stop: threading.Event) -> None:
+        # the capture is used and released by this thread only: releasing it from another thread
+        # while read() blocks can crash OpenCV's FFmpeg backend
         cap = self._open()
-        with self._cap_lock:
-            self._cap = cap
+        try:
+            self._read(cap, stop)
+        finally:
+            if cap is not None:
+                cap.release()
+
+    def _read(self, cap, stop: threading.Event) -> None:
         if cap is None or not cap.isOpened():
             what = ("is it plugged in, and not in use by another program (a video call)?" if self.kind == "device"
-                    else "check the address and that the stream is running")
+                    else "check the address and that the stream is running.")
             self._set_state("error", f"could not open {self.describe()}: {what} Press Reconnect to try again")
             return
         last_good = time.monotonic()
         n = 0
         while not stop.is_set():
-            try:
-                ok, image = cap.read()
-            except Exception:  # released under us by close()
-                ok, image = False, None
+            ok, image = cap.read()
             if stop.is_set():
                 return
             if ok and image is not None and image.ndim == 3 and image.size:
@@ -325,7 +318,6 @@ class CaptureLive(LiveSource):
             stop.wait(0.02)
         if stop.is_set():
             return
-        self._halt()
         if self.kind == "device":
             self._set_state("error", f"{self.describe()} stopped sending frames (unplugged?); plug it back in "
                                      "and press Reconnect; the samples so far are kept")
