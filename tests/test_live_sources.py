@@ -275,9 +275,9 @@ def test_cli_extrinsics_writes_version_2(tmp_path, session, capsys):
 
 # ---------------------------------------------------------------------- extrinsic upload
 class _FileServer(http.server.BaseHTTPRequestHandler):
-    stored: dict = {}
+    stored: dict = {}  # noqa: RUF012 (one server per test; reset by the fixture)
 
-    def do_POST(self):  # noqa: N802 (http.server's name)
+    def do_POST(self):
         body = self.rfile.read(int(self.headers["Content-Length"]))
         type(self).stored[self.path] = body
         self.send_response(200)
@@ -336,7 +336,7 @@ class _Mjpeg(http.server.BaseHTTPRequestHandler):
 
     frames = 30
 
-    def do_GET(self):  # noqa: N802
+    def do_GET(self):
         self.send_response(200)
         self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=frame")
         self.end_headers()

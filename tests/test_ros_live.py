@@ -23,20 +23,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
-from test_ros_bag_play import (  # noqa: F401 (ros_ok and roscore are fixtures)
-    SYSTEM_PYTHON,
-    _free_port,
-    _log,
-    _ros_tool,
-    _run,
-    _started,
-    ros_ok,
-    roscore,
-    running_roscore,
-)
-
-from test_live_sources import file_server  # noqa: F401 (a fixture)
+import test_live_sources
+import test_ros_bag_play
+from test_ros_bag_play import SYSTEM_PYTHON, _free_port, _log, _ros_tool, _run, _started, running_roscore
 
 from dtscal_lib import calib_files, datasets
 from dtscal_lib import duckietown as dt
@@ -44,6 +33,11 @@ from dtscal_lib.robot import CommitError, commit_intrinsics
 from dtscal_lib.sources import open_live
 
 pytestmark = pytest.mark.slow
+
+# fixtures shared with the other tests
+ros_ok = test_ros_bag_play.ros_ok
+roscore = test_ros_bag_play.roscore
+file_server = test_live_sources.file_server
 
 ROBOT = "synthbot"
 TOPIC = f"/{ROBOT}/camera_node/image/compressed"
@@ -99,6 +93,28 @@ def _kit_env(env) -> dict:
     return out
 
 
+def _cli_on_live_topic(env, args: list[str], bag: str, tmp_path: Path, *, loop: bool = False,
+                       timeout: float = 200) -> dict:
+    """Run ``dtscal ARGS --source ros:ROBOT --json`` (the kit's own venv), play ``bag`` once it subscribed."""
+    cmd = [sys.executable, "-m", "dtscal_lib.cli", *args, "--source", f"ros:{ROBOT}", "--json", "-q"]
+    err_log = tmp_path / "cli.err"
+    with err_log.open("wb") as err:
+        cli = subprocess.Popen(cmd, env=_kit_env(env), stdout=subprocess.PIPE, stderr=err, start_new_session=True)
+    try:
+        _wait(lambda: _subscribers(env, TOPIC) > 0 or cli.poll() is not None, 60, "the kit to subscribe")
+        assert cli.poll() is None, _log(err_log)
+        play = [_ros_tool("rosbag"), "play", "--quiet", *(["--loop"] if loop else []),
+                str(datasets.session_dir() / bag)]
+        with _started(play, env, tmp_path / "play.log"):
+            stdout, _ = cli.communicate(timeout=timeout)
+    finally:
+        if cli.poll() is None:
+            os.killpg(cli.pid, signal.SIGKILL)
+            cli.wait()
+    assert cli.returncode == 0, _log(err_log)
+    return json.loads(stdout)
+
+
 @pytest.fixture
 def camera_node(roscore, tmp_path):
     robot_root = tmp_path / "robot" / "data" / "config" / "calibrations"
@@ -114,24 +130,8 @@ def camera_node(roscore, tmp_path):
 def test_calibrate_from_live_topic_and_commit(roscore, camera_node, tmp_path):
     env = roscore
     out = tmp_path / "calibrations"
-    cli_log = tmp_path / "cli.err"
-    cmd = [sys.executable, "-m", "dtscal_lib.cli", "calibrate-intrinsics", "--source", f"ros:{ROBOT}", "--commit",
-           "--out", str(out), "--max-seconds", "150", "--json", "-q"]
-    with cli_log.open("wb") as err:
-        cli = subprocess.Popen(cmd, env=_kit_env(env), stdout=subprocess.PIPE, stderr=err, start_new_session=True)
-    try:
-        _wait(lambda: _subscribers(env, TOPIC) > 0 or cli.poll() is not None, 60, "the kit to subscribe")
-        assert cli.poll() is None, _log(cli_log)
-        play_log = tmp_path / "play.log"
-        with _started([_ros_tool("rosbag"), "play", "--quiet", str(datasets.session_dir() / "intrinsics.bag")],
-                      env, play_log):
-            stdout, _ = cli.communicate(timeout=200)
-    finally:
-        if cli.poll() is None:
-            os.killpg(cli.pid, signal.SIGKILL)
-            cli.wait()
-    assert cli.returncode == 0, _log(cli_log)
-    run = json.loads(stdout)
+    run = _cli_on_live_topic(env, ["calibrate-intrinsics", "--commit", "--out", str(out), "--max-seconds", "150"],
+                             "intrinsics.bag", tmp_path, timeout=200)
     assert run["robot"] == ROBOT and run["samples_used"] >= 20, run
     assert run["commit"].startswith("Write to ")
     robot_file = camera_node / "camera_intrinsic" / f"{ROBOT}.yaml"
@@ -175,30 +175,30 @@ def test_master_killed_mid_session_then_reconnect(ros_ok, tmp_path):
     home = tmp_path / "home"
     port = _free_port()
     bag = str(datasets.session_dir() / "intrinsics.bag")
-    with running_roscore(home, port) as env:
-        with _started([_ros_tool("rosbag"), "play", "--quiet", "--loop", bag], env, tmp_path / "p1.log"):
-            cam = open_live(f"ros:{ROBOT}", master_uri=env["ROS_MASTER_URI"]).start()
-            try:
-                first = cam.latest(timeout=60)
-                assert first is not None and first.ok, cam.status
-                _wait(lambda: cam.status.frames >= 10, 30, "ten frames")
-                _kill_master(env)
-                st = _wait(lambda: cam.status if cam.status.state == "error" else None, 20, "the error status")
-                assert "went away" in st.message and env["ROS_MASTER_URI"] in st.message and "Reconnect" in st.message
-                kept = cam.latest(timeout=0)
-                assert kept is not None and kept.ok  # the last frame is still there
-                frames_before = cam.status.frames
-            except BaseException:
-                cam.close()
-                raise
+    with running_roscore(home, port) as env, \
+            _started([_ros_tool("rosbag"), "play", "--quiet", "--loop", bag], env, tmp_path / "p1.log"):
+        cam = open_live(f"ros:{ROBOT}", master_uri=env["ROS_MASTER_URI"]).start()
+        try:
+            first = cam.latest(timeout=60)
+            assert first is not None and first.ok, cam.status
+            _wait(lambda: cam.status.frames >= 10, 30, "ten frames")
+            _kill_master(env)
+            st = _wait(lambda: cam.status if cam.status.state == "error" else None, 20, "the error status")
+            assert "went away" in st.message and env["ROS_MASTER_URI"] in st.message and "Reconnect" in st.message
+            kept = cam.latest(timeout=0)
+            assert kept is not None and kept.ok  # the last frame is still there
+            frames_before = cam.status.frames
+        except BaseException:
+            cam.close()
+            raise
     # the robot comes back: a new master on the same port, the camera publishing again
     try:
-        with running_roscore(home, port) as env:
-            with _started([_ros_tool("rosbag"), "play", "--quiet", "--loop", bag], env, tmp_path / "p2.log"):
-                cam.reconnect()
-                again = cam.latest(after=kept.index, timeout=60)
-                assert again is not None and again.ok, cam.status
-                assert cam.status.state == "running" and cam.status.frames > frames_before
+        with running_roscore(home, port) as env, \
+                _started([_ros_tool("rosbag"), "play", "--quiet", "--loop", bag], env, tmp_path / "p2.log"):
+            cam.reconnect()
+            again = cam.latest(after=kept.index, timeout=60)
+            assert again is not None and again.ok, cam.status
+            assert cam.status.state == "running" and cam.status.frames > frames_before
     finally:
         cam.close()
 
@@ -281,7 +281,7 @@ def test_helper_uses_newest_frame_only(roscore, tmp_path):
     assert Path(bag).exists()
 
 
-def test_cli_extrinsics_from_live_topic_and_upload(roscore, file_server, tmp_path):  # noqa: F811
+def test_cli_extrinsics_from_live_topic_and_upload(roscore, file_server, tmp_path):
     env = roscore
     base, stored = file_server
     truth = datasets.load_truth()["camera"]
@@ -291,23 +291,9 @@ def test_cli_extrinsics_from_live_topic_and_upload(roscore, file_server, tmp_pat
     intr = calib_files.save_intrinsics(calib, tmp_path / "in", ROBOT)
     out = tmp_path / "calibrations"
     url = f"{base}/files/data/config/calibrations/camera_extrinsic/{ROBOT}.yaml"
-    cmd = [sys.executable, "-m", "dtscal_lib.cli", "calibrate-extrinsics", "--source", f"ros:{ROBOT}",
-           "--intrinsics", str(intr), "--out", str(out), "--commit", "--upload-url", url, "--max-seconds", "90",
-           "--json", "-q"]
-    err_log = tmp_path / "cli.err"
-    with err_log.open("wb") as err:
-        cli = subprocess.Popen(cmd, env=_kit_env(env), stdout=subprocess.PIPE, stderr=err, start_new_session=True)
-    try:
-        _wait(lambda: _subscribers(env, TOPIC) > 0 or cli.poll() is not None, 60, "the kit to subscribe")
-        with _started([_ros_tool("rosbag"), "play", "--quiet", "--loop",
-                       str(datasets.session_dir() / "extrinsics.bag")], env, tmp_path / "play.log"):
-            stdout, _ = cli.communicate(timeout=120)
-    finally:
-        if cli.poll() is None:
-            os.killpg(cli.pid, signal.SIGKILL)
-            cli.wait()
-    assert cli.returncode == 0, _log(err_log)
-    run = json.loads(stdout)
+    run = _cli_on_live_topic(env, ["calibrate-extrinsics", "--intrinsics", str(intr), "--out", str(out), "--commit",
+                                   "--upload-url", url, "--max-seconds", "90"], "extrinsics.bag", tmp_path,
+                             loop=True, timeout=120)
     local = out / "camera_extrinsic" / f"{ROBOT}.yaml"
     assert run["commit"] == f"uploaded {local} to {url} (HTTP 200)"
     assert stored[url[len(base):]] == local.read_bytes()
