@@ -476,7 +476,9 @@ class RosLive(LiveSource):
                 elif state == "waiting":
                     self._set_state("ended" if n else "connecting", st["message"])
                 elif state == "running" and self.status.state != "running":
-                    self._set_state("connecting", f"{st['message']}; waiting for the first frame")
+                    self._set_state("connecting", f"{st['message']}, but no frame arrived yet; if this lasts, set "
+                                                  "ROS_IP (or ROS_HOSTNAME) to an address of this computer that "
+                                                  "the robot can reach")
         if stop.is_set():
             return
         code = proc.wait()

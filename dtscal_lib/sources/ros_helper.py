@@ -68,11 +68,12 @@ def subscribe(topic):
     import rospy
     from sensor_msgs.msg import CompressedImage
 
-    broken = threading.Event()
+    broken, seen = threading.Event(), threading.Event()
 
     def on_image(msg):
         if broken.is_set():
             return
+        seen.set()
         try:
             _emit(b"F", struct.pack("!d", msg.header.stamp.to_sec()) + bytes(msg.data))
         except (BrokenPipeError, OSError, ValueError):
@@ -92,9 +93,14 @@ def subscribe(topic):
             status("error", f"the ROS master at {MASTER} went away ({type(exc).__name__}); frames stop here. "
                             "Start the robot's ROS again (or check the network) and press Reconnect")
             os._exit(4)
-        now = ("running", f"receiving {topic} from {MASTER}") if n else (
-            "waiting", (f"nobody publishes {topic} on {MASTER} (the bag ended or the camera node stopped); "
-                        "frames resume when it is back, or press Reconnect"))
+        if n:
+            now = ("running", f"{topic} has {n} publisher(s) on {MASTER}")
+        elif seen.is_set():
+            now = ("waiting", f"nobody publishes {topic} on {MASTER} any more (the bag ended or the camera node "
+                              "stopped); frames resume when it is back, or press Reconnect")
+        else:
+            now = ("waiting", f"nobody publishes {topic} on {MASTER} yet: is the robot's camera node running? "
+                              "(`rostopic list` on the robot shows its topics)")
         if now != last:
             status(*now)
             last = now
