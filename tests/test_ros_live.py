@@ -131,7 +131,7 @@ def test_calibrate_from_live_topic_and_commit(roscore, camera_node, tmp_path):
     env = roscore
     out = tmp_path / "calibrations"
     run = _cli_on_live_topic(env, ["calibrate-intrinsics", "--commit", "--out", str(out), "--max-seconds", "150"],
-                             "intrinsics.bag", tmp_path, timeout=200)
+                             "intrinsics.bag", tmp_path, loop=True, timeout=200)  # a camera streams on
     assert run["robot"] == ROBOT and run["samples_used"] >= 20, run
     assert run["commit"].startswith("Write to ")
     robot_file = camera_node / "camera_intrinsic" / f"{ROBOT}.yaml"
