@@ -320,7 +320,7 @@ class CaptureLive(LiveSource):
             return
         if self.kind == "device":
             self._set_state("error", f"{self.describe()} stopped sending frames (unplugged?); plug it back in "
-                                     "and press Reconnect; the samples so far are kept")
+                                     "and press Reconnect")
         else:
             self._set_state("ended", f"{self.describe()} ended or the connection dropped after {n} frames; "
                                      "press Reconnect to try again")
@@ -472,7 +472,7 @@ class RosLive(LiveSource):
                 state = st.get("state")
                 if state == "error":
                     said_error = True
-                    self._set_state("error", st["message"] + "; the samples so far are kept")
+                    self._set_state("error", st["message"])
                 elif state == "waiting":
                     self._set_state("ended" if n else "connecting", st["message"])
                 elif state == "running" and self.status.state != "running":
@@ -541,9 +541,12 @@ class LiveFrames:
                     continue
                 st = cam.status
                 if st.state in ("ended", "error"):
-                    self.stopped = st.message
+                    self.stopped = (st.message.replace("press Reconnect", "run the command again")
+                                    .replace("Press Reconnect", "Run the command again"))
                     break
             self.bad = cam.status.bad
+        if after < 0 and self.stopped and not self.stopped.startswith("stopped"):
+            raise SourceError(f"no frame from {self.live.describe()}: {self.stopped}")
 
 
 # ---------------------------------------------------------------------- the one entry point
