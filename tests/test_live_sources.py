@@ -401,3 +401,26 @@ def test_offline_commit_to_a_folder_that_cannot_be_written(tmp_path):
         target.chmod(0o755)
     assert previous.read_bytes() == before
     assert calib_files.save_intrinsics(calib, tmp_path / "elsewhere", "bot1").exists()
+
+
+@pytest.mark.slow
+def test_memory_stays_flat_over_18000_frames(tmp_path):
+    """Ten minutes of a 30 fps camera, played as fast as possible: no queue, no image history."""
+    import tracemalloc
+
+    bag = _bag(tmp_path / "r.bag", 50)
+    tracemalloc.start()
+    try:
+        with open_live(bag, realtime=False, loop=True) as cam:
+            after, early = -1, None
+            while cam.status.frames < 18_000:
+                f = cam.latest(after=after, timeout=5)
+                assert f is not None, cam.status
+                after = f.index
+                if early is None and cam.status.frames >= 2_000:
+                    early = tracemalloc.get_traced_memory()[0]
+            late = tracemalloc.get_traced_memory()[0]
+            assert cam.status.state == "running" and cam.status.bad == {}
+    finally:
+        tracemalloc.stop()
+    assert late - early < 1_000_000, (early, late)  # bytes
