@@ -298,6 +298,14 @@ def test_cli_extrinsics_from_live_topic_and_upload(roscore, file_server, tmp_pat
     assert run["commit"] == f"uploaded {local} to {url} (HTTP 200)"
     assert stored[url[len(base):]] == local.read_bytes()
     assert run["corner_residual_mm"]["max"] < 3.0, run
+    # against the truth: the board corners' rectified pixels (from the true homography, same P) to the ground
+    ext = datasets.load_truth()["extrinsics"]
+    ground = np.asarray(ext["ground_points"], float)
+    pix = np.linalg.inv(np.asarray(ext["homography"], float)) @ np.c_[ground, np.ones(len(ground))].T
+    back = np.asarray(run["homography"], float).reshape(3, 3) @ pix
+    err_mm = 1000 * np.linalg.norm((back[:2] / back[2]).T - ground, axis=1)
+    assert err_mm.max() < 3.0, f"worst corner {err_mm.max():.2f} mm"
+    print(f"extrinsics from the live topic: worst board corner {err_mm.max():.2f} mm from the truth")
 
 
 def test_cli_commit_without_service_keeps_the_written_file(roscore, tmp_path):
