@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import http.server
+import os
 import threading
 import time
 
@@ -379,8 +380,6 @@ def test_mjpeg_stream_url_ends_and_reconnects():
 
 def test_offline_commit_to_a_folder_that_cannot_be_written(tmp_path):
     """Writing camera_intrinsic/<ROBOT>.yaml fails: a clear error, the previous file intact, saving elsewhere works."""
-    import os
-
     calib = calib_files.IntrinsicCalibration.from_dict(dt.DEFAULT_INTRINSICS, "default")
     folder = tmp_path / "calibrations"
     previous = calib_files.save_intrinsics(calib, folder, "bot1")
@@ -403,24 +402,27 @@ def test_offline_commit_to_a_folder_that_cannot_be_written(tmp_path):
     assert calib_files.save_intrinsics(calib, tmp_path / "elsewhere", "bot1").exists()
 
 
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
 @pytest.mark.slow
 def test_memory_stays_flat_over_18000_frames(tmp_path):
-    """Ten minutes of a 30 fps camera, played as fast as possible: no queue, no image history."""
-    import tracemalloc
+    """Ten minutes of a 30 fps camera, played as fast as possible: no queue, no image history.
 
+    Keeping the 18,000 frames (57.6 kB each here) would take about 1 GB; the resident size may
+    grow by 30 MB at most (allocator noise).
+    """
     bag = _bag(tmp_path / "r.bag", 50)
-    tracemalloc.start()
-    try:
-        with open_live(bag, realtime=False, loop=True) as cam:
-            after, early = -1, None
-            while cam.status.frames < 18_000:
-                f = cam.latest(after=after, timeout=5)
-                assert f is not None, cam.status
-                after = f.index
-                if early is None and cam.status.frames >= 2_000:
-                    early = tracemalloc.get_traced_memory()[0]
-            late = tracemalloc.get_traced_memory()[0]
-            assert cam.status.state == "running" and cam.status.bad == {}
-    finally:
-        tracemalloc.stop()
-    assert late - early < 1_000_000, (early, late)  # bytes
+    with open_live(bag, realtime=False, loop=True) as cam:
+        after, early = -1, None
+        while cam.status.frames < 18_000:
+            f = cam.latest(after=after, timeout=5)
+            assert f is not None, cam.status
+            after = f.index
+            if early is None and cam.status.frames >= 2_000:
+                early = _rss_bytes()
+        late = _rss_bytes()
+        assert cam.status.state == "running" and cam.status.bad == {}
+    assert late - early < 30_000_000, (early, late)
