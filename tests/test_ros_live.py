@@ -25,7 +25,15 @@ import numpy as np
 import pytest
 import test_live_sources
 import test_ros_bag_play
-from test_ros_bag_play import SYSTEM_PYTHON, _free_port, _log, _ros_tool, _run, _started, running_roscore
+from test_ros_bag_play import (
+    SYSTEM_PYTHON,
+    _free_port,
+    _log,
+    _ros_tool,
+    _run,
+    _started,
+    running_roscore,
+)
 
 from dtscal_lib import calib_files, datasets
 from dtscal_lib import duckietown as dt

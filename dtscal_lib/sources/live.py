@@ -30,6 +30,7 @@ folder, glob)           rate (``realtime=True``) or as fast as it decodes; ``loo
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import struct
@@ -40,6 +41,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 
@@ -142,18 +144,16 @@ class LiveSource:
     def describe(self) -> str:
         return self.spec
 
-    def __enter__(self) -> LiveSource:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def __del__(self):  # pragma: no cover - best effort
-        try:
+    def __del__(self):  # pragma: no cover - best effort at interpreter exit
+        with contextlib.suppress(Exception):
             self._stop.set()
             self._halt()
-        except Exception:
-            pass
 
     def __repr__(self) -> str:
         s = self.status
@@ -201,7 +201,7 @@ class LiveSource:
         except DtscalError as exc:
             if not stop.is_set():
                 self._set_state("error", f"{exc}; press Reconnect to try again")
-        except Exception as exc:  # a receiver bug must show as a status, never kill the notebook
+        except Exception as exc:  # noqa: BLE001 (a receiver bug must show as a status, never kill the notebook)
             if not stop.is_set():
                 self._set_state("error", f"{self.describe()} stopped: {type(exc).__name__}: {exc}; "
                                          "press Reconnect to try again")
@@ -423,7 +423,7 @@ class RosLive(LiveSource):
         self.master = master_uri(master)
         self._python = ros_python()
         self._proc: subprocess.Popen | None = None
-        self._log = tempfile.TemporaryFile()
+        self._log = tempfile.TemporaryFile()  # noqa: SIM115 (the helper's stderr, open while the source lives)
 
     def describe(self) -> str:
         return f"{self.topic} on {self.master}"
