@@ -426,3 +426,34 @@ def test_memory_stays_flat_over_18000_frames(tmp_path):
         late = _rss_bytes()
         assert cam.status.state == "running" and cam.status.bad == {}
     assert late - early < 30_000_000, (early, late)
+
+
+@pytest.mark.slow
+def test_cli_calibrates_from_a_webcam(monkeypatch, tmp_path, capsys):
+    """``--source device:0`` end to end; the webcam is stood in for by the recording's frames at 30 fps."""
+    frames = [data for _, _, data in datasets.read_bag_jpegs(datasets.session_dir() / "intrinsics.bag")]
+
+    class RecordedCamera(_FakeCamera):
+        def __init__(self):
+            super().__init__(len(frames))
+            self.t0 = time.monotonic()
+
+        def read(self):
+            i = int((time.monotonic() - self.t0) * 30)  # a camera delivers in real time
+            if i >= len(frames):
+                return False, None
+            time.sleep(1 / 60)
+            return True, cv2.imdecode(np.frombuffer(frames[i], np.uint8), cv2.IMREAD_COLOR)
+
+    monkeypatch.setattr(CaptureLive, "_open", lambda self: RecordedCamera())
+    out = tmp_path / "cal"
+    code = cli_main(["calibrate-intrinsics", "--source", "device:0", "--robot", "laptopcam", "--out", str(out),
+                     "--max-seconds", "60", "--json", "-q"])
+    assert code == 0
+    import json
+
+    run = json.loads(capsys.readouterr().out)
+    assert run["samples_used"] >= 15 and run["output"].endswith("camera_intrinsic/laptopcam.yaml")
+    K = calib_files.load_intrinsics(out / "camera_intrinsic" / "laptopcam.yaml").K
+    truth = np.asarray(datasets.load_truth()["camera"]["K"])
+    assert abs(K[0, 0] / truth[0, 0] - 1) < 0.01 and abs(K[1, 1] / truth[1, 1] - 1) < 0.01
