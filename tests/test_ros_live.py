@@ -328,3 +328,17 @@ def test_cli_commit_without_service_keeps_the_written_file(roscore, tmp_path):
     assert f"{written} is kept" in res.stderr
     assert "calibrated nobot" in res.stdout and f"wrote {written}" in res.stdout  # the result was printed
     calib_files.load_intrinsics(written)  # the calibration itself was saved
+
+
+def test_corrupt_frames_over_ros_are_counted(roscore, tmp_path):
+    """JPEGs damaged on the way (cut short) arrive over ROS: counted by reason, never handed out."""
+    env = roscore
+    bag = test_live_sources._bag(tmp_path / "bad.bag", 10, fps=10, corrupt={2, 5, 6})  # on /testbot/camera_node/image/compressed
+    with open_live("ros:testbot", master_uri=env["ROS_MASTER_URI"]) as cam:
+        _wait(lambda: _subscribers(env, "/testbot/camera_node/image/compressed") > 0, 60, "the helper to subscribe")
+        play = _run([_ros_tool("rosbag"), "play", "--quiet", "-d", "0.5", bag], env)
+        assert play.returncode == 0, play.stdout + play.stderr
+        st = _wait(lambda: cam.status if cam.status.state == "ended" else None, 20, "the ended status")
+        assert st.frames == 10 and st.bad == {"corrupt_jpeg": 3}, st
+        last = cam.latest(timeout=0)
+        assert last is not None and last.ok and last.index == 9
