@@ -333,7 +333,8 @@ def test_cli_commit_without_service_keeps_the_written_file(roscore, tmp_path):
 def test_corrupt_frames_over_ros_are_counted(roscore, tmp_path):
     """JPEGs damaged on the way (cut short) arrive over ROS: counted by reason, never handed out."""
     env = roscore
-    bag = test_live_sources._bag(tmp_path / "bad.bag", 10, fps=10, corrupt={2, 5, 6})  # on /testbot/camera_node/image/compressed
+    # published on /testbot/camera_node/image/compressed
+    bag = test_live_sources._bag(tmp_path / "bad.bag", 10, fps=10, corrupt={2, 5, 6})
     with open_live("ros:testbot", master_uri=env["ROS_MASTER_URI"]) as cam:
         _wait(lambda: _subscribers(env, "/testbot/camera_node/image/compressed") > 0, 60, "the helper to subscribe")
         play = _run([_ros_tool("rosbag"), "play", "--quiet", "-d", "0.5", bag], env)
