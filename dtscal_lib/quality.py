@@ -472,8 +472,10 @@ def _offset_findings(result, obj_list, img_list, res, noise, rounds: int = 2) ->
         flagged = _line_offsets(obj_list, img_list, res, noise)
         if not flagged:
             break
+        size = {k: float(np.median(np.abs(list(d.values())))) for k, d in flagged.items()}
+        top = max(size.values())
         best = None
-        for axis, line in flagged:
+        for axis, line in [k for k in flagged if size[k] >= 0.5 * top]:  # the strongest suspects only
             fit, means = _without_line(result, obj_list, img_list, axis, line)
             if fit is not None and (best is None or fit.sigma < best[2].sigma):
                 best = (axis, line, fit, means)
