@@ -170,6 +170,8 @@ class Quality:
     corner_counts: np.ndarray  # (3, 3) observed corners per ninth of the image
     help_region: str
     tilt_spread_deg: float
+    #: the report page when one was written (:func:`dtscal_lib.report.quality_for_run`)
+    report_path: object = None
 
     @property
     def noise_model(self) -> str:
