@@ -204,7 +204,7 @@ class Quality:
             "projection_uncertainty": None if u is None else {
                 "corner_sigma_px": float(u.corner_mean),
                 "per_corner_sigma_px": [float(s) for s in u.corner_sigma],
-                "max_sigma_px": float(u.sigma.max()),
+                "max_sigma_px": float(max(u.sigma.max(), u.corner_sigma.max())),
                 "distance": float(u.distance),
                 "worst_region": u.worst_region(),
             },
