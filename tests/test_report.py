@@ -95,7 +95,8 @@ def test_warnings_go_to_stderr_and_say_what_to_do(parallel, tmp_path):
 def test_no_warning_when_the_verdict_is_good(good):
     res, _ = good
     err = io.StringIO()
-    q = report.quality_for_run(SimpleNamespace(result=res, robot="bot", source="s", samples=res.n_views), None, stream=err)
+    run = SimpleNamespace(result=res, robot="bot", source="s", samples=res.n_views)
+    q = report.quality_for_run(run, None, stream=err)
     assert q.verdict == "good" and err.getvalue() == "" and q.report_path is None
 
 
