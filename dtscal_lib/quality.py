@@ -114,7 +114,7 @@ class Finding:
                 "views": [int(v) for v in self.views]}
 
     def warning(self) -> str:
-        return f"calibration {self.severity}: {self.message}. {self.advice}"
+        return f"calibration {self.severity}: {self.message}; what to do: {self.advice}"
 
 
 @dataclass
@@ -150,7 +150,8 @@ class UncertaintyMap:
             for c in range(3):
                 sel = (ri == r) & (ci == c)
                 if sel.any():
-                    means[r, c] = self.sigma.ravel()[sel].mean()
+                    vals = self.sigma.ravel()[sel]  # NaN: the lens model cannot even be inverted there
+                    means[r, c] = np.inf if np.isnan(vals).any() else vals.mean()
         r, c = np.unravel_index(int(np.argmax(means)), means.shape)
         return REGION_NAMES[r][c]
 
@@ -202,9 +203,10 @@ class Quality:
             "fit_to_noise": float(self.fit_sigma / max(self.noise_sigma, NOISE_FLOOR_PX)),
             "tilt_spread_deg": float(self.tilt_spread_deg),
             "projection_uncertainty": None if u is None else {
-                "corner_sigma_px": float(u.corner_mean),
+                "corner_sigma_px": None if np.isnan(u.corner_mean) else float(u.corner_mean),
                 "per_corner_sigma_px": [float(s) for s in u.corner_sigma],
-                "max_sigma_px": float(max(u.sigma.max(), u.corner_sigma.max())),
+                "max_sigma_px": float(max(np.nanmax(u.sigma), np.nanmax(u.corner_sigma))),
+                "unprojectable_share": float(np.isnan(u.sigma).mean()),
                 "distance": float(u.distance),
                 "worst_region": u.worst_region(),
             },
@@ -328,6 +330,24 @@ def _projection_jacobian(P: np.ndarray, K: np.ndarray, dist: np.ndarray, skew: b
     return q, dP, dI
 
 
+def _rays(result, pix: np.ndarray) -> np.ndarray:
+    """Unit rays (M, 3) of pixels; NaN where the distortion model cannot be inverted (far outside the data)."""
+    from .errors import DtscalError
+
+    xy = pixel_to_normalized(pix, result.K)
+    try:
+        und = undistort_normalized(xy, result.dist)
+    except DtscalError:
+        und = np.full_like(xy, np.nan)
+        for i, p in enumerate(xy):
+            try:
+                und[i] = undistort_normalized(p[None], result.dist)[0]
+            except DtscalError:
+                pass
+    ray = np.column_stack([und, np.ones(len(und))])
+    return ray / np.linalg.norm(ray, axis=1, keepdims=True)
+
+
 def projection_uncertainty(result, pixels, *, distance: float | None = None, cov=None) -> np.ndarray:
     """Covariance (M, 2, 2) of the projection of the fixed 3-D points seen at ``pixels``.
 
@@ -355,9 +375,7 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     C, n = _full_covariance(result) if cov is None else cov
     if distance is None:
         distance = float(np.median(np.linalg.norm(result.tvecs, axis=1)))
-    ray = undistort_normalized(pixel_to_normalized(pix, result.K), result.dist)
-    ray = np.column_stack([ray, np.ones(len(ray))])
-    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    ray = _rays(result, pix)
     at_infinity = not np.isfinite(distance)
     P = ray if at_infinity else distance * ray
     dist_idx = _dist_indices(result.model, fix_k3=abs(result.dist[4]) == 0.0)
@@ -450,7 +468,7 @@ def _without_line(result, obj_list, img_list, axis: int, line: int):
     try:
         fit = calibrate([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)],
                         result.image_size, model=result.model, skew=result.skew, fix_k3=abs(result.dist[4]) == 0.0)
-    except DtscalError:
+    except (DtscalError, cv2.error, np.linalg.LinAlgError):  # e.g. too few points left in a view
         return None, None
     means = []
     for o, p, k, r, t in zip(obj_list, img_list, keep, fit.rvecs, fit.tvecs):
@@ -650,7 +668,13 @@ def assess(result, *, uncertainty: bool = True, distance: float | None = None) -
     else:
         r, c = np.unravel_index(int(np.argmin(counts)), counts.shape)
         help_region = REGION_NAMES[r][c]
-    if umap is not None and umap.corner_mean > CORNER_SIGMA_DOUBTFUL:
+    if umap is not None and np.isnan(umap.corner_mean):
+        findings.append(Finding(
+            "uncertainty", "bad",
+            "the distortion model cannot be inverted at the image corners: fitted without corners there, "
+            "it folds over and does not describe the lens",
+            f"hold the board next in the {help_region} of the image and in the other image corners"))
+    elif umap is not None and umap.corner_mean > CORNER_SIGMA_DOUBTFUL:
         findings.append(Finding(
             "uncertainty", "bad" if umap.corner_mean > CORNER_SIGMA_BAD else "doubtful",
             f"a pixel at the image corners can move by {umap.corner_mean:.2f} px (1 sigma) within the "
@@ -679,9 +703,7 @@ def monte_carlo_projection(result, pixels, *, runs: int = 50, distance: float | 
     pix = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
     if distance is None:
         distance = float(np.median(np.linalg.norm(result.tvecs, axis=1)))
-    ray = undistort_normalized(pixel_to_normalized(pix, result.K), result.dist)
-    ray = np.column_stack([ray, np.ones(len(ray))])
-    P = distance * ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    P = distance * _rays(result, pix)
     R0 = [cv2.Rodrigues(r.reshape(3, 1))[0] for r in result.rvecs]
     Xb = [(P - t) @ R for R, t in zip(R0, result.tvecs)]
     obj = [np.column_stack([np.asarray(o)[:, :2], np.zeros(len(o))]) for o in result.object_points]

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from .errors import DtscalError
 from .quality import REGION_NAMES, Quality, assess
 
 __all__ = ["fig_view_rms", "fig_worst_residuals", "fig_residual_histogram", "fig_uncertainty_map", "fig_coverage",
@@ -133,7 +134,9 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
     if u is None:
         ax.text(0.5, 0.5, "uncertainty not computed", ha="center", va="center", transform=ax.transAxes)
         return fig
-    levels = np.geomspace(max(u.sigma.min(), 1e-6), max(u.sigma.max(), 2e-6), 12)
+    finite = u.sigma[np.isfinite(u.sigma)]
+    lo, hi = (finite.min(), finite.max()) if finite.size else (1e-6, 2e-6)
+    levels = np.geomspace(max(lo, 1e-6), max(hi, 2 * max(lo, 1e-6)), 12)
     cs = ax.contourf(u.u, u.v, u.sigma, levels=levels, cmap="viridis", norm=_log_norm(levels))
     fig.colorbar(cs, ax=ax, label="1-sigma projection uncertainty (px)", format="%.3g")
     pts = np.concatenate([np.asarray(p).reshape(-1, 2) for p in result.image_points])
@@ -196,7 +199,11 @@ def write_report(result, directory, quality: Quality | None = None, *, title: st
     ``extra`` : optional ``{label: value}`` rows for the summary table (robot, source, ...).
     """
     out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DtscalError(f"cannot create the report folder {out} ({exc.strerror or exc}); give a folder "
+                          "that can be written, e.g. --report report") from None
     q = _q(result, quality)
     for name, (fn, _) in FIGURES.items():
         fig = fn(result, q)

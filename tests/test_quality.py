@@ -206,3 +206,19 @@ def test_uncertainty_agrees_with_monte_carlo_recalibration(session):
     cov = np.einsum("rmi,rmj->mij", dev, dev) / (len(runs) - 1)
     mc = quality.worst_direction_sigma(cov)
     assert np.mean(mc) == pytest.approx(umap.corner_mean, rel=0.25)
+
+
+def test_a_lens_model_that_folds_over_at_the_image_corners_is_bad_not_a_crash():
+    """Four views in the middle of the image: the fitted distortion cannot be inverted at the image corners."""
+    poses = [([0.3, 0.1, 0.0], [-0.1, -0.06, 0.35]), ([-0.2, 0.3, 0.1], [-0.1, -0.05, 0.4]),
+             ([0.1, -0.35, -0.1], [-0.08, -0.07, 0.3]), ([-0.3, -0.2, 0.2], [-0.1, -0.04, 0.45])]
+    rng = np.random.default_rng(0)
+    img = [camera.project_points(OBJ, r, t, dt.default_K(), dt.default_dist()) + rng.normal(0, 0.05, (35, 2))
+           for r, t in poses]
+    q = calibrate([OBJ] * 4, img, dt.IMAGE_SIZE).quality()
+    assert q.verdict == "bad"
+    f = next(f for f in q.findings if f.code == "uncertainty")
+    assert "cannot be inverted" in f.message and "image corners" in f.advice
+    d = json.loads(json.dumps(q.to_dict()))  # NaN never reaches the JSON
+    assert d["projection_uncertainty"]["corner_sigma_px"] is None
+    assert 0 < d["projection_uncertainty"]["unprojectable_share"] < 1

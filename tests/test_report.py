@@ -18,6 +18,7 @@ from dtscal_lib import camera, datasets, duckietown as dt, report
 from dtscal_lib.boards import DUCKIETOWN_BOARD
 from dtscal_lib.calibration import calibrate
 from dtscal_lib.datasets import session_dir
+from dtscal_lib.errors import DtscalError
 
 OBJ = DUCKIETOWN_BOARD.object_points()
 
@@ -131,3 +132,10 @@ def test_report_page_from_the_command_line_loads_in_chromium(tmp_path):
             browser.close()
     assert len(widths) == len(report.FIGURES) and all(w > 0 for w in widths), widths
     assert verdict == "good"
+
+
+def test_a_report_folder_that_cannot_be_made_is_a_clear_error(parallel, tmp_path):
+    blocker = tmp_path / "taken"
+    blocker.write_text("a file, not a folder")
+    with pytest.raises(DtscalError, match="cannot create the report folder"):
+        report.write_report(parallel, blocker / "rep")
