@@ -77,6 +77,8 @@ OFFSET_VIEW_SHARE = 0.25
 RADIAL_Z, RADIAL_FRACTION = 6.0, 0.5
 #: mean correlation of the residual vectors of grid-neighbouring corners that counts as shared error
 NEIGHBOUR_CORRELATION = 0.5
+#: residuals this many times the noise, shared by neighbouring corners, are a bad (not doubtful) pattern
+SYSTEMATIC_RATIO_BAD = 2.0
 #: fewer views than this cannot tell a bad view from the rest
 MIN_GOOD_VIEWS = 6
 #: largest angle between a board normal and the mean normal, degrees: below the first bad, the second doubtful
@@ -559,13 +561,18 @@ def _radial_finding(result, res, noise) -> Finding | None:
     if worst is None:
         return None
     m, r0, r1 = worst
-    richer = ("use --model plumb_bob" if result.model == "radial2" else
-              "estimate k3 as well (or a rational model)")
+    richer = _richer_model(result)
     return Finding("radial", "bad" if abs(m) > 2 * noise else "doubtful",
                    f"corners {r0:.0f}-{r1:.0f} px from the principal point are off by {m:+.2f} px radially on "
                    f"average (corner noise {noise:.3f} px): a radial pattern the {result.model} distortion "
                    "model cannot absorb",
                    f"{richer}; and show the board in the image corners, where distortion is strongest")
+
+
+def _richer_model(result) -> str:
+    if result.model == "radial2":
+        return "use --model plumb_bob (radial2 has no tangential terms)"
+    return "estimate k3 as well (or use a richer lens model)"
 
 
 def _neighbour_correlation(obj_list, res) -> float:
@@ -635,10 +642,13 @@ def assess(result, *, uncertainty: bool = True, distance: float | None = None) -
     rho = _neighbour_correlation(obj, res)
     if rho > NEIGHBOUR_CORRELATION and ratio > 1.2 and not line_findings:
         findings.append(Finding(
-            "neighbour_correlation", "doubtful" if ratio <= FIT_RATIO_BAD else "bad",
-            f"neighbouring corners share their error (correlation {rho:.2f} of adjacent residuals, 0 for noise)",
-            "a pattern the model cannot absorb: try the richer distortion model (plumb_bob; k3), check that "
-            "the board is flat and its squares are the size given"))
+            # above 2x the noise the systematic part of the residual is larger than the noise itself
+            # (sqrt(ratio^2 - 1) > 1.7): the parameters are biased far beyond their standard deviations
+            "neighbour_correlation", "doubtful" if ratio <= SYSTEMATIC_RATIO_BAD else "bad",
+            f"neighbouring corners share their error (correlation {rho:.2f} of adjacent residuals, 0 for noise) "
+            f"and the residuals are {ratio:.1f} times the corner noise: a pattern the {result.model} model "
+            "cannot absorb, which biases the parameters beyond their standard deviations",
+            f"{_richer_model(result)}; check that the board is flat and its squares are the size given"))
 
     if result.n_views < MIN_GOOD_VIEWS:
         findings.append(Finding(

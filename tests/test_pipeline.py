@@ -213,8 +213,9 @@ def test_skew_and_radial2_from_the_command_line(radial2_skew_run):
     assert data["dist"][2:] == [0.0, 0.0, 0.0]
     np.testing.assert_allclose(data["K"], radial2_skew_run.result.K, rtol=1e-9)  # the command is the pipeline
     # radial2 cannot follow this lens (it has tangential terms): the verdict says so and what to do
-    assert data["quality"]["verdict"] != "good"
-    assert data["quality"]["warnings"] and "plumb_bob" in p.stderr
+    assert data["quality"]["verdict"] == "bad"
+    assert "neighbour_correlation" in [f["code"] for f in data["quality"]["findings"]]
+    assert "use --model plumb_bob" in p.stderr
 
 
 def test_radial2_biases_the_skew_exactly_as_the_missing_tangential_terms_predict(radial2_skew_run, truth):
