@@ -11,6 +11,7 @@ notebook (the figure displays as the cell's value) and the live calibrator alike
 - :func:`fig_uncertainty_map` -- 1-sigma projection uncertainty over the image
 - :func:`fig_coverage` -- where in the image the corners came from
 - :func:`write_report` -- all of them as PNGs plus one ``index.html`` with the verdict
+- :func:`show` -- display figures in a notebook cell as PNG images
 
 Example
 -------
@@ -42,7 +43,7 @@ from .errors import DtscalError
 from .quality import REGION_NAMES, Quality, assess
 
 __all__ = ["fig_view_rms", "fig_worst_residuals", "fig_residual_histogram", "fig_uncertainty_map", "fig_coverage",
-           "write_report", "FIGURES"]
+           "write_report", "show", "quality_for_run", "FIGURES"]
 
 _VERDICT_COLOUR = {"good": "#1a7f37", "doubtful": "#b35900", "bad": "#c62828"}
 
@@ -178,6 +179,22 @@ def fig_coverage(result, quality: Quality | None = None) -> Figure:
     ax.set_title(f"where the corners came from ({result.n_points} corners, {result.n_views} views); "
                  f"red: add views here", fontsize=9)
     return fig
+
+
+def show(*figs: Figure, dpi: int = 100) -> None:
+    """Display figures in a notebook as PNG images, whatever matplotlib backend is active.
+
+    A pyplot-free ``Figure`` shows as the cell's value only once the inline backend is configured;
+    this works in any cell (and in the live calibrator's output widgets).
+    """
+    import io
+
+    from IPython.display import Image, display
+
+    for fig in figs:
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=dpi)
+        display(Image(data=buf.getvalue(), format="png"))
 
 
 #: file name -> (function, caption) of the report's figures, in page order

@@ -139,3 +139,15 @@ def test_a_report_folder_that_cannot_be_made_is_a_clear_error(parallel, tmp_path
     blocker.write_text("a file, not a folder")
     with pytest.raises(DtscalError, match="cannot create the report folder"):
         report.write_report(parallel, blocker / "rep")
+
+
+def test_show_displays_png_images(good, monkeypatch):
+    import IPython.display
+
+    shown = []
+    monkeypatch.setattr(IPython.display, "display", lambda obj: shown.append(obj))
+    res, q = good
+    report.show(report.fig_view_rms(res, q), report.fig_coverage(res, q))
+    assert len(shown) == 2
+    for img in shown:
+        assert img.data[:8] == b"\x89PNG\r\n\x1a\n"
