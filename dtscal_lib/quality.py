@@ -290,7 +290,7 @@ def _full_covariance(result) -> tuple[np.ndarray, int]:
     """``sigma^2 (J^T J)^-1`` over all parameters ``[intrinsics, pose_0 (rvec, t), pose_1, ...]``."""
     from .calibration import _dist_indices, _normal_blocks, _Problem
 
-    dist_idx = _dist_indices(result.model, fix_k3=abs(result.dist[4]) == 0.0)
+    dist_idx = _dist_indices(result.model, fix_k3="k3" not in result.std)
     problem = _Problem([np.asarray(o)[:, :2] for o in result.object_points], result.image_points,
                        result.skew, dist_idx)
     theta = np.concatenate([[result.K[0, 0], result.K[1, 1], result.K[0, 2], result.K[1, 2]],
@@ -380,7 +380,7 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     ray = _rays(result, pix)
     at_infinity = not np.isfinite(distance)
     P = ray if at_infinity else distance * ray
-    dist_idx = _dist_indices(result.model, fix_k3=abs(result.dist[4]) == 0.0)
+    dist_idx = _dist_indices(result.model, fix_k3="k3" not in result.std)
     _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew, dist_idx)
     V = result.n_views
     G = np.zeros((len(P), 2, C.shape[0]))
@@ -469,7 +469,7 @@ def _without_line(result, obj_list, img_list, axis: int, line: int):
     keep = [grid_indices(o)[:, axis] != line for o in obj_list]
     try:
         fit = calibrate([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)],
-                        result.image_size, model=result.model, skew=result.skew, fix_k3=abs(result.dist[4]) == 0.0)
+                        result.image_size, model=result.model, skew=result.skew, fix_k3="k3" not in result.std)
     except (DtscalError, cv2.error, np.linalg.LinAlgError):  # e.g. too few points left in a view
         return None, None
     means = []
@@ -719,7 +719,7 @@ def monte_carlo_projection(result, pixels, *, runs: int = 50, distance: float | 
     obj = [np.column_stack([np.asarray(o)[:, :2], np.zeros(len(o))]) for o in result.object_points]
     perfect = [project_points(o, r, t, result.K, result.dist) for o, r, t in zip(obj, result.rvecs, result.tvecs)]
     s = result.sigma if noise is None else noise
-    fix_k3 = abs(result.dist[4]) == 0.0
+    fix_k3 = "k3" not in result.std
     out = []
     for _ in range(runs):
         rr = calibrate(obj, [p + rng.normal(0.0, s, p.shape) for p in perfect], result.image_size,

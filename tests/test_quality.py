@@ -136,11 +136,12 @@ def test_a_view_that_fits_far_worse_is_named():
     assert q.verdict in ("doubtful", "bad")
 
 
-def test_projection_jacobian_matches_finite_differences():
+@pytest.mark.parametrize("skew,fix_k3", [(True, True), (False, False)])
+def test_projection_jacobian_matches_finite_differences(skew, fix_k3):
     """The propagated covariance is J C J^T with J of the mean-over-boards projection, checked numerically."""
     rng = np.random.default_rng(11)
-    obj, img = _views(6, rng)
-    res = calibrate(obj, img, dt.IMAGE_SIZE, skew=True)
+    obj, img = _views(8, rng)
+    res = calibrate(obj, img, dt.IMAGE_SIZE, skew=skew, fix_k3=fix_k3)
     pix = np.array([[0.0, 0.0], [320.0, 240.0], [600.0, 60.0]])
     C, n = quality._full_covariance(res)
     d = 0.4
@@ -148,12 +149,12 @@ def test_projection_jacobian_matches_finite_differences():
     ray = np.column_stack([ray, np.ones(len(ray))])
     P = d * ray / np.linalg.norm(ray, axis=1, keepdims=True)
     Xb = [(P - t) @ cv2.Rodrigues(r.reshape(3, 1))[0] for r, t in zip(res.rvecs, res.tvecs)]
-    di = _dist_indices(res.model, True)
-    x0 = np.concatenate([[res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2], res.K[0, 1]], res.dist[di],
-                         np.column_stack([res.rvecs, res.tvecs]).ravel()])
+    di = _dist_indices(res.model, fix_k3)
+    x0 = np.concatenate([[res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]], [res.K[0, 1]] if skew else [],
+                         res.dist[di], np.column_stack([res.rvecs, res.tvecs]).ravel()])
 
     def f(x):
-        K, dist = _unpack(x[:n], True, di)
+        K, dist = _unpack(x[:n], skew, di)
         ps = x[n:].reshape(-1, 6)
         Pm = np.mean([X @ cv2.Rodrigues(p[:3].reshape(3, 1))[0].T + p[3:] for X, p in zip(Xb, ps)], axis=0)
         return camera.project_points(Pm, np.zeros(3), np.zeros(3), K, dist).ravel()
