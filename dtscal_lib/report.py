@@ -143,12 +143,15 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
     pts = np.concatenate([np.asarray(p).reshape(-1, 2) for p in result.image_points])
     ax.plot(pts[:, 0], pts[:, 1], ",", color="w", alpha=0.5)
     for (x, y), s in zip(u.corners, u.corner_sigma):
-        ax.text(x + (10 if x < 1 else -10), y + (22 if y < 1 else -12), f"{s:.2f} px",
+        ax.text(x + (10 if x < 1 else -10), y + (22 if y < 1 else -12), "?" if np.isnan(s) else f"{s:.2f} px",
                 ha="left" if x < 1 else "right", color="w", fontsize=9, weight="bold")
     _image_axes(ax, result.image_size)
     where = "infinity" if not np.isfinite(u.distance) else f"{u.distance:.3g} (board units)"
-    ax.set_title(f"projection uncertainty, points at distance {where}\nimage corners {u.corner_mean:.2f} px "
-                 f"(1 sigma); more data would help most: {u.worst_region()}", fontsize=9)
+    corners = ("lens model not invertible there (grey)" if np.isnan(u.corner_mean)
+               else f"{u.corner_mean:.2f} px (1 sigma)")
+    ax.set_facecolor("0.8")
+    ax.set_title(f"projection uncertainty, points at distance {where}\nimage corners: {corners}; "
+                 f"more data would help most: {u.worst_region()}", fontsize=9)
     return fig
 
 
@@ -238,7 +241,8 @@ def write_report(result, directory, quality: Quality | None = None, *, title: st
         "RMS / residual sigma": f"{result.rms:.3f} / {q.fit_sigma:.3f} px",
         "noise model": html.escape(q.noise_model),
         "projection uncertainty at the image corners":
-            "-" if q.uncertainty is None else f"{q.uncertainty.corner_mean:.3f} px (1 sigma)",
+            "-" if q.uncertainty is None else "the lens model cannot be inverted there"
+            if np.isnan(q.uncertainty.corner_mean) else f"{q.uncertainty.corner_mean:.3f} px (1 sigma)",
         "more data would help most": html.escape(q.help_region),
     })
     colour = _VERDICT_COLOUR[q.verdict]
