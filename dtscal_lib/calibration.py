@@ -120,6 +120,16 @@ class CalibrationResult:
     sigma: float = field(default=float("nan"))
     #: Levenberg-Marquardt iterations used
     iterations: int = 0
+    #: the views the result was fitted to, (N_i, 2) board-plane points and (N_i, 2) pixels, for
+    #: :meth:`quality` (residuals, verdict, projection uncertainty)
+    object_points: list = field(default_factory=list, repr=False)
+    image_points: list = field(default_factory=list, repr=False)
+
+    def quality(self, **kw):
+        """Verdict, systematic-residual checks and projection uncertainty: :func:`dtscal_lib.quality.assess`."""
+        from .quality import assess
+
+        return assess(self, **kw)
 
     def camera(self) -> CameraModel:
         """The calibrated camera, with ``P`` from ``alpha = 0`` as ROS's calibrator sets it."""
@@ -639,6 +649,8 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
         n_points=int(npts.sum()),
         sigma=float(np.sqrt(sigma2)),
         iterations=iters,
+        object_points=obj,
+        image_points=img,
     )
 
 

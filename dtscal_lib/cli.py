@@ -89,13 +89,18 @@ def cmd_calibrate_intrinsics(args) -> int:
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
                                progress=_progress(not args.quiet, "frames"), keep_anyway=args.keep_anyway,
                                max_seconds=args.max_seconds)
+    from .report import quality_for_run  # verdict; warnings on stderr; figures + index.html with --report
+
+    quality = quality_for_run(run, args.report)
     committed, failed = _commit(args, run, "intrinsics")
     if args.json:
-        _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
+        _print_json({**run.to_dict(), "quality": quality.to_dict(),
+                     "report": str(quality.report_path) if quality.report_path else None,
+                     "commit": committed, "commit_error": failed and str(failed)})
     else:
         r = run.result
         print(f"calibrated {run.robot}: {run.samples} samples from {run.tally.total} frames "
-              f"({run.source}); rms {r.rms:.3f} px")
+              f"({run.source}); rms {r.rms:.3f} px; verdict {quality.verdict}")
         names = ["fx", "fy", "cx", "cy"] + (["skew"] if r.skew else [])
         vals = [r.K[0, 0], r.K[1, 1], r.K[0, 2], r.K[1, 2]] + ([r.K[0, 1]] if r.skew else [])
         for n, v in zip(names, vals):
@@ -105,6 +110,8 @@ def cmd_calibrate_intrinsics(args) -> int:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
             print(f"wrote {run.path}")
+        if quality.report_path:
+            print(f"wrote {quality.report_path}")
         if committed:
             print(f"committed to {run.robot}: {committed}")
     if failed:  # after the result is printed: nothing computed is lost
@@ -271,6 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     common(sp)
     sp.add_argument("--model", choices=["plumb_bob", "radial2"], default="plumb_bob")
     sp.add_argument("--skew", action="store_true", help="also estimate the skew of K (own refinement)")
+    sp.add_argument("--report", metavar="DIR", help="write figures and DIR/index.html on how good the calibration is")
     sp.set_defaults(func=cmd_calibrate_intrinsics)
 
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")
