@@ -562,3 +562,95 @@ def write_defaults(out_dir) -> list[Path]:
         validate_homography(dt.DEFAULT_HOMOGRAPHY, "duckietown.DEFAULT_HOMOGRAPHY")
         written.append(_write(ep, {"homography": list(dt.DEFAULT_HOMOGRAPHY)}, backup=False))
     return written
+
+
+# --------------------------------------------------------------------------- extrinsic file formats
+#: the comment header Duckietown's current library (lib-dt-computer-vision) writes above a version-2 file
+V2_HEADER = ("# IMPORTANT: Do not use this homography directly with your images. The homography in this file is\n"
+             "#            stored in a resolution-independent format (version 2, written by dtscal).\n")
+
+
+def _v2_frame(calib: IntrinsicCalibration) -> tuple[np.ndarray, np.ndarray]:
+    """``(Kp, Hv2i)`` of the rectified camera ``P``: pixel->vector and vector->[0, 1] image coordinates."""
+    Kp = np.array(calib.P[:, :3], dtype=np.float64)
+    fx, fy, cx, cy = Kp[0, 0], Kp[1, 1], Kp[0, 2], Kp[1, 2]
+    tl = np.array([-cx / fx, -cy / fy])
+    br = np.array([(calib.width - 1 - cx) / fx, (calib.height - 1 - cy) / fy])
+    sx, sy = 1.0 / (br - tl)
+    return Kp, np.array([[sx, 0, -tl[0] * sx], [0, sy, -tl[1] * sy], [0, 0, 1.0]])
+
+
+def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
+    """Classic homography (rectified pixel -> ground m) -> the 3x3 matrix of a version-2 file.
+
+    Mirrors lib-dt-computer-vision: its tool fits ``H_v`` from normalized image vectors
+    ``Kp^-1 [u, v, 1]`` of the rectified image to the ground and stores ``inv(Hv2i) @ H_v``
+    (``ResolutionDependentHomography.camera_independent``); its reader undoes exactly that
+    (``camera_specific``: ``Hv2i @ F``). ``Kp`` is the rectified camera (``P[:, :3]``).
+    """
+    Kp, Hv2i = _v2_frame(calib)
+    Hv = validate_homography(H, "classic homography") @ Kp
+    return np.linalg.inv(Hv2i) @ (Hv / Hv[2, 2])
+
+
+def extrinsic_from_v2(F, calib: IntrinsicCalibration, where: str = "version-2 homography") -> np.ndarray:
+    """The 3x3 matrix of a version-2 file -> classic homography (rectified pixel -> ground m), ``H[2,2] = 1``."""
+    F = np.asarray(F, dtype=np.float64)
+    if F.size != 9 or not np.all(np.isfinite(F)):
+        raise _fail(where, "a version-2 homography is 3 rows of 3 finite numbers")
+    Kp, Hv2i = _v2_frame(calib)
+    H = (Hv2i @ F.reshape(3, 3)) @ np.linalg.inv(Kp)
+    if abs(H[2, 2]) < 1e-12:
+        raise _fail(where, "maps the image to points at infinity; recalibrate the extrinsics")
+    return validate_homography(H / H[2, 2], where)
+
+
+def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | None]:
+    """Read a classic or version-2 ``camera_extrinsic`` file as ``(H, format, date)``.
+
+    ``H`` is always the classic homography (rectified pixel -> ground metres); ``format`` is
+    ``"classic"`` or ``"2"``; ``date`` the file's ISO date (None for classic). A version-2 file
+    needs ``intrinsics`` (an :class:`IntrinsicCalibration` or the path of one) to be converted.
+    """
+    doc, where = _read_yaml(path)
+    if "version" not in doc:
+        return load_extrinsics(path), "classic", None
+    if str(doc["version"]).strip() != "2":
+        raise _fail(where, f"extrinsic file version {doc['version']!r} is not supported (classic or '2')")
+    rows = doc.get("homography")
+    if not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)):
+        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers")
+    F = [[_number(v, where, f"homography[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
+    if intrinsics is None:
+        raise _fail(where, "is a version-2 (resolution-independent) file; pass the robot's intrinsic file "
+                           "to convert it (--intrinsics camera_intrinsic/ROBOT.yaml)")
+    calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
+    date = doc.get("date")
+    return extrinsic_from_v2(F, calib, where), "2", None if date is None else str(date)
+
+
+def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None) -> Path:
+    """Write ``camera_extrinsic/<robot>.yaml`` in the classic format (default) or as version ``"2"``.
+
+    ``H`` is the classic homography; ``fmt="2"`` needs ``intrinsics`` (object or path) and stamps
+    ``date`` (default now, ISO 8601).
+    """
+    if fmt == "classic":
+        return save_extrinsics(H, out_dir, robot)
+    if fmt != "2":
+        raise CalibrationFileError(f"extrinsic format {fmt!r} is unknown; use 'classic' or '2'")
+    if intrinsics is None:
+        raise CalibrationFileError("the version-2 extrinsic format needs the intrinsic calibration; pass intrinsics=")
+    import datetime
+
+    calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
+    check_robot_name(robot)
+    path = extrinsic_path(out_dir, robot)
+    F = extrinsic_to_v2(H, calib)
+    stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
+    text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})
+    try:
+        return _atomic_write(path, text)
+    except OSError as e:
+        raise CalibrationFileError(f"{path}: could not be written ({e}); the previous file is unchanged. "
+                                   "Check that the folder exists and is writable") from e
