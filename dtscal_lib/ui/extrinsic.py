@@ -35,7 +35,8 @@ from ..camera import CameraModel, rectify_image
 from ..errors import DtscalError
 from ..ground import birdseye_view, calibrate_extrinsics, draw_ground_grid, pixel_to_ground
 from . import render
-from .frameloop import FrameLoop, open_live
+from ..sources.live import open_live
+from .frameloop import FrameLoop
 from .intrinsic import robot_of
 
 
@@ -89,6 +90,11 @@ class LiveExtrinsics:
         self.reconnect_button = w.Button(description="RECONNECT", icon="refresh")
         self.robot_text = w.Text(value=self.robot, description="robot")
         self.folder_text = w.Text(value=str(calibration_dir), description="folder", layout=lay(width="420px"))
+        self.format = w.Dropdown(options=[("classic (homography: 9 values)", "classic"),
+                                          ('version "2" (resolution-independent)', "2")],
+                                 value="classic", description="format")
+        self.target = w.Dropdown(options=[("calibration folder", "folder"), ("folder and robot (upload)", "robot")],
+                                 value="robot" if self.spec.startswith("ros:") else "folder", description="save to")
         self.message = w.HTML("")
         for b, fn in ((self.save_button, self.save), (self.reset_button, self.reset_best),
                       (self.reconnect_button, self.reconnect)):
@@ -98,7 +104,7 @@ class LiveExtrinsics:
             self.status,
             w.HBox([self.image, w.VBox([w.HTML("<b>top view of the board</b>"), self.top, self.error_text])]),
             w.HBox([self.save_button, self.reset_button, self.reconnect_button, self.robot_text]),
-            self.folder_text, self.message,
+            w.HBox([self.folder_text, self.format, self.target]), self.message,
             w.HTML("<b>validation</b> with the best homography: ground grid (5 cm) on the live image, "
                    "and a bird's-eye view"),
             w.HBox([self.grid, self.birdseye]),
@@ -107,13 +113,11 @@ class LiveExtrinsics:
         if autostart:
             self.loop.start()
 
-    def _ipython_display_(self):
-        from IPython.display import display
-
-        display(self.widget)
-
     def _repr_mimebundle_(self, **kw):
-        return self.widget._repr_mimebundle_(**kw)
+        bundle = self.widget._repr_mimebundle_(**kw)
+        # the widget's own text form changes with every frame; this one is stable (stored outputs)
+        bundle["text/plain"] = "live extrinsic tool (shown as a widget in JupyterLab)"
+        return bundle
 
     # ------------------------------------------------------------------ intrinsics
     def camera(self) -> CameraModel | None:
@@ -202,18 +206,27 @@ class LiveExtrinsics:
 
     # ------------------------------------------------------------------ actions
     def save(self) -> str:
-        """Write the best homography so far as ``camera_extrinsic/<ROBOT>.yaml`` in the folder."""
+        """Write the best homography so far as ``camera_extrinsic/<ROBOT>.yaml`` in the folder
+        (classic or version-2 format) and, with the target "robot", upload it to the robot."""
         with self._lock:
             best, frame = self.best, self.best_frame
         if best is None:
             return self._say("nothing to save yet: no frame gave a fit", "error")
         try:
             robot = calib_files.check_robot_name(self.robot)
-            path = calib_files.save_extrinsics(best.H, self.folder_text.value.strip(), robot)
+            cam = self.camera()
+            calib = calib_files.IntrinsicCalibration.from_camera(cam, camera_name=f"/{robot}/camera_node")
+            path = calib_files.save_extrinsics_as(best.H, self.folder_text.value.strip(), robot,
+                                                  fmt=self.format.value, intrinsics=calib)
+            text = (f"SAVE: wrote {path} (best fit, frame {frame}, mean error "
+                    f"{np.mean(best.residual_mm):.2f} mm)")
+            if self.target.value == "robot":
+                from ..robot import commit_extrinsics
+
+                text += "; " + commit_extrinsics(robot, path, master_uri=getattr(self.source, "master", None))
         except (DtscalError, OSError) as exc:
             return self._say(f"SAVE failed: {exc}. The previous file is unchanged.", "error")
-        return self._say(f"SAVE: wrote {path} (best fit, frame {frame}, mean error "
-                         f"{np.mean(best.residual_mm):.2f} mm)", "ok")
+        return self._say(text, "ok")
 
     def reset_best(self) -> None:
         """Forget the best fit (e.g. after moving the robot on the board)."""

@@ -14,15 +14,6 @@ from collections import Counter, deque
 from typing import Callable
 
 
-def open_live(spec, *, realtime: bool = True, loop: bool = False):
-    """The pinned live-source interface (``dtscal_lib.sources.live.open_live``)."""
-    try:
-        from ..sources.live import open_live as _open
-    except ImportError:  # issue 10a's module not merged yet
-        from ._recording import open_live as _open
-    return _open(str(spec), realtime=realtime, loop=loop)
-
-
 class FrameLoop:
     """Pull the newest frame of ``source`` and process it in a daemon thread.
 

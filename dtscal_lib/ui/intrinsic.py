@@ -22,7 +22,6 @@ Examples
 
 from __future__ import annotations
 
-import tempfile
 import threading
 import time
 from collections import Counter
@@ -40,7 +39,8 @@ from ..errors import DtscalError
 from ..pipeline import MIN_SAMPLES, calibrate_without_outlier_views, robot_from_topic
 from . import render
 from .archive import load_session, save_session
-from .frameloop import FrameLoop, open_live
+from ..sources.live import open_live
+from .frameloop import FrameLoop
 
 
 def robot_of(spec: str, source=None) -> str | None:
@@ -166,13 +166,11 @@ class LiveCalibrator:
             self.loop.start()
 
     # ------------------------------------------------------------------ display
-    def _ipython_display_(self):
-        from IPython.display import display
-
-        display(self.widget)
-
     def _repr_mimebundle_(self, **kw):
-        return self.widget._repr_mimebundle_(**kw)
+        bundle = self.widget._repr_mimebundle_(**kw)
+        # the widget's own text form changes with every frame; this one is stable (stored outputs)
+        bundle["text/plain"] = "live calibrator (shown as a widget in JupyterLab)"
+        return bundle
 
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
@@ -341,7 +339,8 @@ class LiveCalibrator:
         return text
 
     def commit(self) -> str:
-        """Send the calibration to the robot (ROS) or write it into the calibration folder.
+        """Write ``camera_intrinsic/<ROBOT>.yaml`` into the calibration folder and, with the
+        target "robot over ROS", send it to ``/<ROBOT>/camera_node/set_camera_info``.
 
         On failure the message says why; the previous file on the robot or in the folder
         is unchanged, and SAVE still keeps the new calibration.
@@ -351,18 +350,13 @@ class LiveCalibrator:
             return self._say("nothing to commit yet: CALIBRATE first", "error")
         try:
             robot = calib_files.check_robot_name(self.robot)
+            path = calib_files.save_intrinsics(calib, self.folder_text.value.strip(), robot)
             if self.commit_target.value == "folder":
-                path = calib_files.save_intrinsics(calib, self.folder_text.value.strip(), robot)
                 return self._say(f"COMMIT: wrote {path} (the previous file, if any, is kept as .bak)", "ok")
             from ..robot import commit_intrinsics
 
-            with tempfile.TemporaryDirectory() as d:
-                f = calib_files.save_intrinsics(calib, d, robot)
-                answer = commit_intrinsics(robot, f)
-            return self._say(f"COMMIT to {robot}: {answer}", "ok")
-        except ImportError:
-            return self._say("COMMIT over ROS needs dtscal_lib.robot, which this installation lacks; "
-                             "commit to a calibration folder instead, or SAVE", "error")
+            answer = commit_intrinsics(robot, path, master_uri=getattr(self.source, "master", None))
+            return self._say(f"COMMIT to {robot}: {answer} (local copy: {path})", "ok")
         except (DtscalError, OSError) as exc:
             return self._say(f"COMMIT failed: {exc}. The previous calibration is unchanged; "
                              "SAVE still keeps this one.", "error")
