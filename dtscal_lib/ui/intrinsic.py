@@ -126,7 +126,7 @@ class LiveCalibrator:
         self.image = w.Image(format="jpeg", layout=lay(width="640px"))
         self.bars = w.HTML(render.bars_html(CoverageTracker(board).bars()))
         self.count = w.HTML("samples: 0")
-        self.thumb_box = w.HBox([], layout=lay(overflow_x="auto", width="660px", min_height="96px"))
+        self.thumb_box = w.HBox([], layout=lay(overflow="auto", width="660px", min_height="96px"))
         self.calibrate_button = w.Button(description="CALIBRATE", disabled=True, button_style="primary",
                                          tooltip="enabled when every bar is green or at 40 samples")
         self.commit_button = w.Button(description="COMMIT", disabled=True, button_style="success")
