@@ -56,7 +56,7 @@ def test_bars_fill_and_calibrate_is_enabled_by_the_ros_rule(filled):
     assert not filled.calibrate_button.disabled
     assert filled.commit_button.disabled  # nothing to commit before CALIBRATE
     assert not filled.loop.errors, filled.loop.last_error
-    assert filled.image.value[:2] == b"\xff\xd8" and "@" in filled.image.tooltip
+    assert filled.image.value[:2] == b"\xff\xd8" and "dtscal-live" in filled.image._dom_classes
 
 
 def test_calibrate_button_then_commit_to_a_folder(filled, truth, tmp_path):

@@ -157,7 +157,7 @@ class LiveExtrinsics:
         if cam is None:
             with self.image.hold_sync():
                 self.image.value = render.encode_jpeg(img)
-                self.image.tooltip = f"frame {frame.index} @ {arrival:.6f}"
+                self.image._dom_classes = render.stamp_classes(frame.index, arrival)
             self.error_text.value = render.message_html(
                 "waiting for an intrinsic calibration: CALIBRATE in the calibrator above", "error")
             return
@@ -198,7 +198,7 @@ class LiveExtrinsics:
             self.error_text.value = render.message_html(f"no fit on this frame: {self.reason}", "error")
         with self.image.hold_sync():
             self.image.value = render.encode_jpeg(view)
-            self.image.tooltip = f"frame {frame.index} @ {arrival:.6f}"
+            self.image._dom_classes = render.stamp_classes(frame.index, arrival)
         self.top.value = render.encode_jpeg(render.top_view(self.ground_true, fit))
         if best is not None:
             self.grid.value = render.encode_jpeg(draw_ground_grid(rect, best.H))

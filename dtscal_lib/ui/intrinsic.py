@@ -216,7 +216,7 @@ class LiveCalibrator:
         jpeg = render.encode_jpeg(drawn)
         with self.image.hold_sync():
             self.image.value = jpeg
-            self.image.tooltip = f"frame {frame.index} @ {arrival:.6f}"
+            self.image._dom_classes = render.stamp_classes(frame.index, arrival)
         if added:
             self.bars.value = render.bars_html(bars)
             self.count.value = f"samples: {n}"
@@ -232,7 +232,7 @@ class LiveCalibrator:
 
         im = w.Image(value=self.thumbs[i], format="jpeg", layout=w.Layout(width="96px"))
         b = w.Button(description=f"drop {i + 1}", layout=w.Layout(width="96px"), tooltip="drop this sample")
-        box = w.VBox([im, b])
+        box = w.VBox([im, b], layout=w.Layout(min_width="100px", flex="0 0 auto"))
         b.on_click(lambda _b, box=box: self.drop_sample(list(self.thumb_box.children).index(box)))
         self.thumb_box.children = (*self.thumb_box.children, box)
 

@@ -25,6 +25,15 @@ def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     return buf.tobytes()
 
 
+def stamp_classes(index: int, arrival: float) -> tuple[str, str, str]:
+    """CSS classes that tag a live image with its frame and its arrival time (ms since the epoch).
+
+    They travel in the same widget update as the image, so a page (the browser test) can
+    measure the time from a frame's arrival in the kernel to its display.
+    """
+    return ("dtscal-live", f"dtscal-frame-{int(index)}", f"dtscal-at-{int(round(arrival * 1000))}")
+
+
 def thumbnail(image: np.ndarray, corners: np.ndarray | None, width: int = 96) -> bytes:
     """A small JPEG of a sample: the frame scaled to ``width`` with the board outline drawn."""
     h, w = image.shape[:2]
