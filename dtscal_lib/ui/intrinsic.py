@@ -41,6 +41,7 @@ from . import render
 from .archive import load_session, save_session
 from ..sources.live import open_live
 from .frameloop import FrameLoop
+from .solver import SolverProcess
 
 
 def robot_of(spec: str, source=None) -> str | None:
@@ -119,6 +120,8 @@ class LiveCalibrator:
         self._job: threading.Thread | None = None
         self._preview_maps = None
         self._preview_key = None
+        # CALIBRATE runs in a helper process (see solver.py: in a thread, it would stall the image)
+        self._solver: SolverProcess | None = None
 
         # ---- widgets
         lay = w.Layout
@@ -210,6 +213,8 @@ class LiveCalibrator:
             n = len(self.tracker.samples)
             ready = self.tracker.ready()
             bars = self.tracker.bars() if added else None
+        if added and n >= MIN_SAMPLES:
+            self.prepare_calibration()
         self.frames_seen += 1
         self.last_frame = img
         drawn = draw_detection(img, det)
@@ -292,13 +297,35 @@ class LiveCalibrator:
             return self.result
         return job
 
+    def prepare_calibration(self, wait: float = 0.0) -> bool:
+        """Start the calibration process ahead of CALIBRATE (done by itself at 3 samples).
+
+        Returns True when it is ready (waiting up to ``wait`` seconds).
+        """
+        if self._solver is None or not self._solver.alive:
+            try:
+                self._solver = SolverProcess()
+            except OSError:  # no subprocesses here: CALIBRATE runs in a thread of this process
+                self._solver = None
+                return False
+        return self._solver.ready(wait)
+
+    def _solve(self, obj, img, size):
+        """``calibrate_without_outlier_views`` in the calibration process (in this one if that fails)."""
+        if self.prepare_calibration():
+            try:
+                return self._solver.calibrate(obj, img, size, self.model)
+            except (OSError, EOFError):
+                self._solver = None
+        return calibrate_without_outlier_views(obj, img, size, model=self.model)
+
     def _calibrate_job(self, obj, img, size) -> None:
         t0 = time.perf_counter()
         try:
             if len(obj) < MIN_SAMPLES:
                 raise DtscalError(f"only {len(obj)} sample(s); calibration needs at least {MIN_SAMPLES} views "
                                   "of the board at different positions and tilts")
-            result, dropped = calibrate_without_outlier_views(obj, img, size, model=self.model)
+            result, dropped = self._solve(obj, img, size)
             if not np.all(np.isfinite(result.K)):
                 raise DtscalError("the calibration did not converge; collect more varied samples")
         except DtscalError as exc:
@@ -406,8 +433,11 @@ class LiveCalibrator:
         return self._say(f"reconnecting to {self.spec}; {len(self.samples)} samples kept")
 
     def close(self) -> None:
-        """Stop the frame loop and close the source."""
+        """Stop the frame loop, close the source and end the calibration process."""
         self.loop.close()
+        if self._solver is not None:
+            self._solver.close()
+            self._solver = None
 
     def __enter__(self):
         return self
