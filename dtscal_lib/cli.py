@@ -54,9 +54,10 @@ def cmd_calibrate_intrinsics(args) -> int:
 
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
-                               progress=_progress(not args.quiet, "frames"))
+                               progress=_progress(not args.quiet, "frames"), max_seconds=args.max_seconds)
+    committed, failed = _commit(args, run, "intrinsics")
     if args.json:
-        _print_json(run.to_dict())
+        _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
     else:
         r = run.result
         print(f"calibrated {run.robot}: {run.samples} samples from {run.tally.total} frames "
@@ -70,17 +71,57 @@ def cmd_calibrate_intrinsics(args) -> int:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
             print(f"wrote {run.path}")
+        if committed:
+            print(f"committed to {run.robot}: {committed}")
+    if failed:  # after the result is printed: nothing computed is lost
+        raise failed
     return 0
 
 
+def _commit(args, run, kind: str):
+    """--commit: send the written file (or a temporary one with --no-write) to the robot; (reply, CommitError)."""
+    from .robot import CommitError
+
+    if not args.commit:
+        return None, None
+    try:
+        return _send(args, run, kind), None
+    except CommitError as exc:
+        return None, exc
+
+
+def _send(args, run, kind: str) -> str:
+    import tempfile
+
+    from . import calib_files, robot
+
+    path = run.path
+    if path is None:  # --no-write: the robot still needs a file to read from
+        tmp = tempfile.mkdtemp(prefix="dtscal-commit-")
+        path = (calib_files.save_intrinsics(calib_files.IntrinsicCalibration.from_camera(
+                    run.result.camera(), camera_name=f"/{run.robot}/camera_node"), tmp, run.robot)
+                if kind == "intrinsics" else calib_files.save_extrinsics_as(
+                    run.H, tmp, run.robot, fmt=args.format, intrinsics=args.intrinsics))
+    if kind == "intrinsics":
+        return robot.commit_intrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout)
+    return robot.commit_extrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout,
+                                   url=args.upload_url)
+
+
 def cmd_calibrate_extrinsics(args) -> int:
+    from . import calib_files
     from .pipeline import calibrate_extrinsics
 
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
-                               out_dir=None if args.no_write else args.out, topic=args.topic,
-                               progress=_progress(not args.quiet, "frames"))
+                               out_dir=None if args.no_write or args.format != "classic" else args.out,
+                               topic=args.topic, progress=_progress(not args.quiet, "frames"),
+                               max_seconds=args.max_seconds)
+    if args.format != "classic" and not args.no_write:
+        run.path = calib_files.save_extrinsics_as(run.H, args.out, run.robot, fmt=args.format,
+                                                  intrinsics=args.intrinsics)
+    committed, failed = _commit(args, run, "extrinsics")
     if args.json:
-        _print_json(run.to_dict())
+        _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
     else:
         print(f"ground homography for {run.robot} from frame {run.frame_index} ({run.source}):")
         for row in run.H:
@@ -90,6 +131,10 @@ def cmd_calibrate_extrinsics(args) -> int:
               f"{run.residual_mm.max():.2f} mm")
         if run.path:
             print(f"wrote {run.path}")
+        if committed:
+            print(f"committed to {run.robot}: {committed}")
+    if failed:  # after the result is printed: nothing computed is lost
+        raise failed
     return 0
 
 
@@ -160,7 +205,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--square", type=float, default=0.031, help="square size in metres (default 0.031)")
 
     def common(sp):
-        sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images")
+        sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images; live: "
+                        "ros:ROBOT (its camera topic via ROS_MASTER_URI), device:N (webcam), a stream URL")
         sp.add_argument("--topic", help="image topic in a bag (default: the one ending in /image/compressed)")
         sp.add_argument("--robot", help="robot name (default: from the bag topic /ROBOT/camera_node/...)")
         sp.add_argument("--out", default="calibrations", help="calibrations folder to write into (default ./calibrations)")
@@ -168,6 +214,12 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
         sp.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
         board_args(sp)
+        live = sp.add_argument_group("live camera and robot")
+        live.add_argument("--max-seconds", type=float, default=300.0,
+                          help="live sources: stop collecting after this long (default 300)")
+        live.add_argument("--commit", action="store_true", help="also send the result to the robot (see README)")
+        live.add_argument("--master-uri", help="the robot's ROS master (default $ROS_MASTER_URI)")
+        live.add_argument("--commit-timeout", type=float, default=10.0, help="seconds to wait for the robot")
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
     common(sp)
@@ -178,6 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")
     common(sp)
     sp.add_argument("--intrinsics", required=True, help="Duckietown intrinsic YAML (camera_intrinsic/NAME.yaml)")
+    sp.add_argument("--format", choices=["classic", "2"], default="classic",
+                    help="extrinsic file: classic flat homography (default) or Duckietown's newer version 2")
+    sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "
+                    "http://ROBOT.local/files/data/config/calibrations/camera_extrinsic/ROBOT.yaml)")
     sp.set_defaults(func=cmd_calibrate_extrinsics)
 
     sp = sub.add_parser("synth", help="regenerate the synthetic recorded Duckiebot session")

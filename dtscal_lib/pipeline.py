@@ -148,9 +148,19 @@ class IntrinsicRun:
         return out
 
 
+def _open_frames(source_spec, topic, max_seconds=None, done=None):
+    """A recording (:func:`open_source`), or a live camera (``ros:``, ``device:``, URL) read until ``done()``."""
+    from .sources.live import LiveFrames, is_live_spec
+
+    if is_live_spec(source_spec):
+        return LiveFrames(source_spec, topic=topic, max_seconds=max_seconds, done=done)
+    return open_source(source_spec, topic=topic)
+
+
 def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model: str = "plumb_bob",
                          skew: bool = False, robot: str | None = None, out_dir=None, topic: str | None = None,
-                         progress: Callable[[Iterable], Iterable] | None = None) -> IntrinsicRun:
+                         progress: Callable[[Iterable], Iterable] | None = None,
+                         max_seconds: float | None = None) -> IntrinsicRun:
     """Detect the board in every frame of a source, select samples, calibrate, write the YAML.
 
     Streams (bags, videos) use ROS's coverage rule: a detection becomes a sample only when
@@ -163,11 +173,13 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     out_dir : the ``calibrations`` folder; ``out_dir/camera_intrinsic/<robot>.yaml`` is written.
         ``None`` writes nothing.
     progress : optional wrapper around the frame iterator (e.g. tqdm)
+    max_seconds : live cameras only: stop collecting after this long (they stop anyway once
+        the coverage rule enables CALIBRATE)
     """
-    src = open_source(source_spec, topic=topic)
+    tracker: CoverageTracker | None = None
+    src = _open_frames(source_spec, topic, max_seconds, lambda: tracker is not None and tracker.ready())
     robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
     tally = FrameTally()
-    tracker: CoverageTracker | None = None
     stills_obj: list[np.ndarray] = []
     stills_img: list[np.ndarray] = []
     size = None
@@ -197,6 +209,7 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
             stills_obj.append(board.object_points())
             stills_img.append(det.corners)
             tally.used += 1
+    tally.rejected.update(getattr(src, "bad", {}))  # corrupt frames a live source skipped
     if size is None:
         raise DtscalError(f"{src.describe()}: no readable frame ({tally.total} frames, rejected: "
                           f"{dict(tally.rejected) or 'none'}); check the path and the topic")
@@ -248,7 +261,7 @@ class ExtrinsicRun:
 
 def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIETOWN_BOARD,
                          robot: str | None = None, out_dir=None, topic: str | None = None,
-                         progress=None) -> ExtrinsicRun:
+                         progress=None, max_seconds: float | None = None) -> ExtrinsicRun:
     """Duckietown's extrinsic procedure on the first usable frame of a source.
 
     ``intrinsics_file`` is a Duckietown intrinsic YAML; the homography maps pixels of the
@@ -259,7 +272,7 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
 
     calib = calib_files.load_intrinsics(intrinsics_file)
     camera = calib.camera()
-    src = open_source(source_spec, topic=topic)
+    src = _open_frames(source_spec, topic, max_seconds)
     robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
     tally = FrameTally()
     frames = progress(src) if progress else src

@@ -158,4 +158,4 @@ def commit_extrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
     return f"uploaded {path} to {target} (HTTP {code})"
 
 
-__all__ = ["CommitError", "commit_intrinsics", "commit_extrinsics", "robot_files_url", "camera_info_dict"]
+__all__ = ["CommitError", "camera_info_dict", "commit_extrinsics", "commit_intrinsics", "robot_files_url"]

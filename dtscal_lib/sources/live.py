@@ -94,7 +94,7 @@ class LiveSource:
         self._closed = False
 
     # ------------------------------------------------------------------ public
-    def start(self) -> "LiveSource":
+    def start(self) -> LiveSource:
         """Begin receiving in the background (no-op when already receiving); returns self."""
         if self._closed:
             raise SourceError(f"{self.describe()} was closed; open it again with open_live({self.spec!r})")
@@ -142,7 +142,7 @@ class LiveSource:
     def describe(self) -> str:
         return self.spec
 
-    def __enter__(self) -> "LiveSource":
+    def __enter__(self) -> LiveSource:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -267,7 +267,7 @@ class CaptureLive(LiveSource):
 
     def __init__(self, spec: str):
         super().__init__(spec)
-        self.kind = "device" if spec.startswith("device:") else "stream"
+        self.kind = "device" if spec.lower().startswith("device:") else "stream"
         if self.kind == "device":
             text = spec.split(":", 1)[1]
             if not text.strip().isdigit():
@@ -275,8 +275,6 @@ class CaptureLive(LiveSource):
             self.target: int | str = int(text)
         else:
             self.target = spec
-        self._cap = None
-        self._cap_lock = threading.Lock()
 
     def describe(self) -> str:
         return f"camera {self.target}" if self.kind == "device" else f"stream {self.spec}"
@@ -286,31 +284,26 @@ class CaptureLive(LiveSource):
 
         return cv2.VideoCapture(self.target)
 
-    def _halt(self) -> None:
-        with self._cap_lock:
-            cap, self._cap = self._cap, None
-        if cap is not None:
-            try:
-                cap.release()
-            except Exception:
-                pass
-
     def _run(self, stop: threading.Event) -> None:
+        # the capture is used and released by this thread only: releasing it from another thread
+        # while read() blocks can crash OpenCV's FFmpeg backend
         cap = self._open()
-        with self._cap_lock:
-            self._cap = cap
+        try:
+            self._read(cap, stop)
+        finally:
+            if cap is not None:
+                cap.release()
+
+    def _read(self, cap, stop: threading.Event) -> None:
         if cap is None or not cap.isOpened():
             what = ("is it plugged in, and not in use by another program (a video call)?" if self.kind == "device"
-                    else "check the address and that the stream is running")
+                    else "check the address and that the stream is running.")
             self._set_state("error", f"could not open {self.describe()}: {what} Press Reconnect to try again")
             return
         last_good = time.monotonic()
         n = 0
         while not stop.is_set():
-            try:
-                ok, image = cap.read()
-            except Exception:  # released under us by close()
-                ok, image = False, None
+            ok, image = cap.read()
             if stop.is_set():
                 return
             if ok and image is not None and image.ndim == 3 and image.size:
@@ -325,7 +318,6 @@ class CaptureLive(LiveSource):
             stop.wait(0.02)
         if stop.is_set():
             return
-        self._halt()
         if self.kind == "device":
             self._set_state("error", f"{self.describe()} stopped sending frames (unplugged?); plug it back in "
                                      "and press Reconnect; the samples so far are kept")
@@ -359,7 +351,7 @@ def _ros_probe(py: str) -> str | None:
         else:
             try:
                 r = subprocess.run([py, "-c", "import rospy, sensor_msgs.msg, sensor_msgs.srv"],
-                                   env=_clean_env(DEFAULT_MASTER), capture_output=True, timeout=60)
+                                   env=_clean_env(DEFAULT_MASTER), capture_output=True, timeout=60, check=False)
                 _PROBED[py] = None if r.returncode == 0 else (r.stderr.decode(errors="replace").strip()
                                                               .splitlines() or ["import failed"])[-1]
             except (OSError, subprocess.TimeoutExpired) as exc:
@@ -376,10 +368,21 @@ def master_uri(uri: str | None = None) -> str:
 
 
 def _clean_env(uri: str) -> dict[str, str]:
-    """Environment for a ROS process: no venv, no PYTHONPATH; the ROS network variables kept."""
+    """Environment for a ROS process: no venv; the ROS network variables kept.
+
+    Debian's ROS needs nothing else. In a shell where a ROS distribution's ``setup.bash`` was
+    sourced (``ROS_DISTRO`` is set, e.g. a ROS noetic container) its paths are kept too.
+    """
     env = {"PATH": "/usr/bin:/bin:/usr/local/bin", "LANG": "C.UTF-8", "PYTHONUNBUFFERED": "1",
            "ROS_MASTER_URI": uri, "HOME": os.environ.get("HOME") or tempfile.gettempdir()}
-    for k in ("ROS_HOSTNAME", "ROS_IP", "ROS_HOME", "ROS_LOG_DIR"):
+    keep = ["ROS_HOSTNAME", "ROS_IP", "ROS_HOME", "ROS_LOG_DIR"]
+    if os.environ.get("ROS_DISTRO"):
+        keep += ["ROS_DISTRO", "ROS_PACKAGE_PATH", "ROS_ROOT", "ROS_ETC_DIR", "PYTHONPATH", "LD_LIBRARY_PATH",
+                 "CMAKE_PREFIX_PATH"]
+        venv = os.environ.get("VIRTUAL_ENV")
+        env["PATH"] = os.pathsep.join(p for p in os.environ.get("PATH", env["PATH"]).split(os.pathsep)
+                                      if not (venv and p.startswith(venv)))
+    for k in keep:
         if os.environ.get(k):
             env[k] = os.environ[k]
     env.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "dtscal-ros-log"))
@@ -391,7 +394,7 @@ def run_ros_helper(args: list[str], *, master: str | None = None, stdin: bytes |
     """Run the helper once (e.g. a service call) and return its completed process."""
     py = ros_python()
     return subprocess.run([py, str(HELPER), *args], input=stdin, env=_clean_env(master_uri(master)),
-                          capture_output=True, timeout=timeout)
+                          capture_output=True, timeout=timeout, check=False)
 
 
 def _read_exact(stream, n: int) -> bytes | None:
@@ -473,7 +476,9 @@ class RosLive(LiveSource):
                 elif state == "waiting":
                     self._set_state("ended" if n else "connecting", st["message"])
                 elif state == "running" and self.status.state != "running":
-                    self._set_state("connecting", f"{st['message']}; waiting for the first frame")
+                    self._set_state("connecting", f"{st['message']}, but no frame arrived yet; if this lasts, set "
+                                                  "ROS_IP (or ROS_HOSTNAME) to an address of this computer that "
+                                                  "the robot can reach")
         if stop.is_set():
             return
         code = proc.wait()
@@ -488,6 +493,57 @@ class RosLive(LiveSource):
             self._log.close()
         except OSError:
             pass
+
+
+# ---------------------------------------------------------------------- for the command line
+class LiveFrames:
+    """A live source as a finite iterable of frames, for the headless pipeline.
+
+    Yields the newest good frames until ``done()`` is true, ``max_seconds`` have passed, or the
+    source ends or fails; then :attr:`stopped` says why in a sentence and :attr:`bad` counts the
+    frames skipped as corrupt.
+    """
+
+    is_stream = True
+    kind = "live"
+
+    def __init__(self, spec: str, *, topic: str | None = None, max_seconds: float | None = None,
+                 done=None, master_uri: str | None = None):
+        self.spec = spec
+        self.live = open_live(spec, topic=topic, master_uri=master_uri)
+        self.topic = self.live.topic
+        self.max_seconds = max_seconds
+        self.done = done or (lambda: False)
+        self.stopped = ""
+        self.bad: dict = {}
+
+    def describe(self) -> str:
+        return self.live.describe() + (f" ({self.stopped})" if self.stopped else "")
+
+    def __len__(self) -> int:
+        raise TypeError("a live source has no length")
+
+    def __iter__(self):
+        t0 = time.monotonic()
+        after = -1
+        with self.live as cam:
+            while True:
+                if self.done():
+                    self.stopped = "stopped: enough samples"
+                    break
+                if self.max_seconds is not None and time.monotonic() - t0 > self.max_seconds:
+                    self.stopped = f"stopped after {self.max_seconds:g} s (--max-seconds)"
+                    break
+                f = cam.latest(after=after, timeout=0.5)
+                if f is not None:
+                    after = f.index
+                    yield f
+                    continue
+                st = cam.status
+                if st.state in ("ended", "error"):
+                    self.stopped = st.message
+                    break
+            self.bad = cam.status.bad
 
 
 # ---------------------------------------------------------------------- the one entry point
@@ -539,5 +595,5 @@ def open_live(spec: str, *, realtime: bool = True, topic: str | None = None, loo
     return RecordingLive(text, realtime=realtime, topic=topic, loop=loop)
 
 
-__all__ = ["LiveSource", "LiveStatus", "RecordingLive", "CaptureLive", "RosLive", "open_live", "is_live_spec",
-           "master_uri", "run_ros_helper", "ros_python"]
+__all__ = ["CaptureLive", "LiveFrames", "LiveSource", "LiveStatus", "RecordingLive", "RosLive", "is_live_spec",
+           "master_uri", "open_live", "ros_python", "run_ros_helper"]

@@ -18,7 +18,6 @@ The subscriber uses ``queue_size=1``: when the reader is slow, ROS drops the old
 
 import json
 import os
-import socket
 import struct
 import sys
 import threading
@@ -69,11 +68,12 @@ def subscribe(topic):
     import rospy
     from sensor_msgs.msg import CompressedImage
 
-    broken = threading.Event()
+    broken, seen = threading.Event(), threading.Event()
 
     def on_image(msg):
         if broken.is_set():
             return
+        seen.set()
         try:
             _emit(b"F", struct.pack("!d", msg.header.stamp.to_sec()) + bytes(msg.data))
         except (BrokenPipeError, OSError, ValueError):
@@ -86,16 +86,21 @@ def subscribe(topic):
     master = master_proxy()
     while not broken.is_set() and os.getppid() == parent:
         try:
-            code, _msg, state = master.getSystemState("/dtscal_live")
+            _code, _msg, state = master.getSystemState("/dtscal_live")
             publishers = [nodes for name, nodes in state[0] if name == topic]
             n = len(publishers[0]) if publishers else 0
         except (OSError, xmlrpc.client.Error) as exc:
             status("error", f"the ROS master at {MASTER} went away ({type(exc).__name__}); frames stop here. "
                             "Start the robot's ROS again (or check the network) and press Reconnect")
             os._exit(4)
-        now = ("running", f"receiving {topic} from {MASTER}") if n else (
-            "waiting", f"nobody publishes {topic} on {MASTER} (the bag ended or the camera node stopped); "
-                       "frames resume when it is back, or press Reconnect")
+        if n:
+            now = ("running", f"{topic} has {n} publisher(s) on {MASTER}")
+        elif seen.is_set():
+            now = ("waiting", f"nobody publishes {topic} on {MASTER} any more (the bag ended or the camera node "
+                              "stopped); frames resume when it is back, or press Reconnect")
+        else:
+            now = ("waiting", f"nobody publishes {topic} on {MASTER} yet: is the robot's camera node running? "
+                              "(`rostopic list` on the robot shows its topics)")
         if now != last:
             status(*now)
             last = now
@@ -134,7 +139,7 @@ def set_camera_info(service, timeout):
     try:
         call = rospy.ServiceProxy(service, SetCameraInfo)
         res = call(info)
-    except (rospy.ServiceException, rospy.ROSException, OSError, socket.error) as exc:
+    except (rospy.ServiceException, rospy.ROSException, OSError) as exc:
         return answer(ok=False, kind="call_failed", message=f"calling {service} failed: {exc}")
     return answer(ok=bool(res.success), kind="done" if res.success else "refused", message=res.status_message)
 
