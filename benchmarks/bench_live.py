@@ -176,7 +176,8 @@ def main(argv=None) -> int:
     c = part_calibrate()
     print(f"Part 2: CALIBRATE with {c['views']} samples while the recording plays at 30 fps")
     print(f"  calibration {c['seconds'] * 1e3:.0f} ms (cv2.calibrateCamera on the same samples "
-          f"{c['baseline'] * 1e3:.0f} ms, ratio {c['seconds'] / c['baseline']:.2f}x); target < {TARGET_CALIBRATE_S:g} s")
+          f"{c['baseline'] * 1e3:.0f} ms, ratio {c['seconds'] / c['baseline']:.2f}x); "
+          f"target < {TARGET_CALIBRATE_S:g} s")
     print(f"  frames displayed meanwhile: {c['frames_during']}; longest gap between displayed frames "
           f"{c['gap'] * 1e3:.0f} ms; target < {TARGET_GAP_S * 1e3:.0f} ms")
     ok &= c["seconds"] < TARGET_CALIBRATE_S and c["gap"] < TARGET_GAP_S

@@ -77,7 +77,8 @@ def lab(tmp_path):
     log = open(tmp_path / "jupyterlab.log", "w")
     proc = subprocess.Popen(
         [sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1", f"--port={port}",
-         f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}", "--ServerApp.open_browser=False", "--allow-root",
+         f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}", "--ServerApp.open_browser=False",
+         "--allow-root",
          "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"],
         cwd=root, env=env, stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
@@ -103,7 +104,7 @@ def lab(tmp_path):
 
 
 def test_notebook_06_calibrates_commits_and_saves_extrinsics_in_the_browser(lab, tmp_path):
-    url, token, root = lab
+    url, token, _root = lab
     # kept after the run (pytest rotates its own temporary folders): the path is printed
     shots = Path(tempfile.mkdtemp(prefix="dtscal-browser-screenshots-"))
     print(f"\nscreenshots: {shots}")

@@ -55,7 +55,7 @@ def test_every_frame_fitted_best_kept_and_saved(camera, truth, tmp_path):
         # the version-2 file holds the same homography
         tool.format.value = "2"
         tool.save()
-        H2, fmt, _ = calib_files.read_extrinsic_file(tmp_path / "camera_extrinsic" / "synthbot.yaml",
+        H2, _fmt, _ = calib_files.read_extrinsic_file(tmp_path / "camera_extrinsic" / "synthbot.yaml",
                                                      intrinsics=calib_files.IntrinsicCalibration.from_camera(
                                                          camera, "/synthbot/camera_node"))
         np.testing.assert_allclose(H2 / H2[2, 2], H / H[2, 2], rtol=1e-6, atol=1e-12)
