@@ -22,6 +22,7 @@ Examples
 
 from __future__ import annotations
 
+import html
 import threading
 import time
 from collections import Counter
@@ -41,7 +42,7 @@ from . import render
 from .archive import load_session, save_session
 from ..sources.live import open_live
 from .frameloop import FrameLoop
-from .solver import SolverProcess
+from .solver import SolverProcess, assess_quality
 
 
 def robot_of(spec: str, source=None) -> str | None:
@@ -60,23 +61,17 @@ def robot_of(spec: str, source=None) -> str | None:
     return name
 
 
-def verdict_html(result) -> str | None:
-    """HOOK for the calibration verdict: ``dtscal_lib.quality`` (issue 7b) once it is merged.
-
-    Returns None while the kit has no verdict module, and the results panel shows none.
-    """
-    try:
-        from .. import quality  # noqa: F401  (issue 7b)
-    except ImportError:
+def verdict_html(quality) -> str | None:
+    """The verdict part of the results panel from :func:`~dtscal_lib.ui.solver.assess_quality`."""
+    if quality is None:
         return None
-    fn = getattr(quality, "verdict_html", None) or getattr(quality, "verdict", None)
-    if fn is None:
-        return None
-    try:
-        out = fn(result)
-    except Exception as exc:  # a verdict must never break the results panel
-        return f"(no verdict: {exc})"
-    return out if isinstance(out, str) else getattr(out, "summary", str(out))
+    if isinstance(quality, str):
+        return render.message_html(quality)
+    findings = "".join(f"<li>{html.escape(str(f.message))} <i>{html.escape(str(f.advice))}</i></li>"
+                       for f in getattr(quality, "findings", []))
+    colour = {"good": render.GREEN, "bad": render.RED}.get(str(quality.verdict), "#b7791f")
+    return (f'<span class="dtscal-verdict" style="color:{colour}"><b>{html.escape(str(quality.verdict))}</b></span>'
+            + (f"<ul>{findings}</ul>" if findings else ""))
 
 
 class LiveCalibrator:
@@ -108,6 +103,7 @@ class LiveCalibrator:
         self.tracker: CoverageTracker | None = None
         self.thumbs: list[bytes] = []
         self.result = None
+        self.quality = None
         self.dropped: list[int] = []
         self.bad: Counter = Counter()
         self.frames_seen = 0
@@ -319,6 +315,17 @@ class LiveCalibrator:
                 self._solver = None
         return calibrate_without_outlier_views(obj, img, size, model=self.model)
 
+    def _assess(self, result):
+        """The verdict (after the result is shown: it can take longer than the calibration)."""
+        if getattr(result, "quality", None) is None:
+            return None
+        if self._solver is not None:
+            try:
+                return self._solver.assess(result)
+            except (OSError, EOFError, DtscalError):
+                pass
+        return assess_quality(result)
+
     def _calibrate_job(self, obj, img, size) -> None:
         t0 = time.perf_counter()
         try:
@@ -339,12 +346,23 @@ class LiveCalibrator:
         else:
             self.calibrate_error = None
             with self._lock:
-                self.result, self.dropped = result, dropped
-            self.results.value = render.calibration_html(result, dropped, len(obj), verdict_html(result))
+                self.result, self.dropped, self.quality = result, dropped, None
+            self.results.value = render.calibration_html(result, dropped, len(obj))
             self.commit_button.disabled = False
             self._preview_key = None
         finally:
             self.calibrate_seconds = time.perf_counter() - t0
+        try:
+            if self.calibrate_error is None:  # the verdict follows; it can take longer than the calibration
+                quality = self._assess(result)
+                verdict = verdict_html(quality)
+                with self._lock:
+                    current = self.result is result
+                    if current:
+                        self.quality = quality
+                if verdict and current:
+                    self.results.value = render.calibration_html(result, dropped, len(obj), verdict)
+        finally:
             with self._lock:
                 self.calibrating = False
                 ready = self.tracker is not None and self.tracker.ready()

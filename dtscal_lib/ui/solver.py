@@ -70,16 +70,35 @@ class SolverProcess:
     def alive(self) -> bool:
         return self._proc.poll() is None and not self._failed
 
-    def calibrate(self, object_points, image_points, image_size, model: str):
-        """``(CalibrationResult, dropped)`` computed in the child; DtscalError as the solver raised it."""
+    def _ask(self, request):
         if not self.ready(wait=120.0):
             raise EOFError("the calibration process did not start")
         with self._lock:
-            _send(self._proc.stdin, (list(object_points), list(image_points), tuple(image_size), model))
+            _send(self._proc.stdin, request)
             kind, value = _receive(self._proc.stdout)
         if kind == "ok":
             return value
         raise DtscalError(value)
+
+    def calibrate(self, object_points, image_points, image_size, model: str):
+        """``(CalibrationResult, dropped)`` computed in the child; DtscalError as the solver raised it."""
+        return self._ask(("calibrate", list(object_points), list(image_points), tuple(image_size), model))
+
+    def assess(self, result):
+        """:func:`assess_quality` of a result, computed in the child."""
+        return self._ask(("assess", result))
+
+
+def assess_quality(result):
+    """HOOK for the calibration's verdict: ``CalibrationResult.quality()`` (``dtscal_lib.quality``,
+    issue 7b) when this kit has it, else None. A failing assessment gives its message (a str)."""
+    fn = getattr(result, "quality", None)
+    if fn is None:
+        return None
+    try:
+        return fn()
+    except Exception as exc:  # the verdict is extra information: it must never lose the calibration
+        return f"no verdict ({type(exc).__name__}: {exc})"
 
     def close(self) -> None:
         if self._proc.poll() is None:
@@ -98,11 +117,15 @@ def _serve() -> None:
     _send(out, "ready")
     while True:
         try:
-            obj, img, size, model = _receive(inp)
+            request = _receive(inp)
         except EOFError:
             return
         try:
-            answer = ("ok", calibrate_without_outlier_views(obj, img, size, model=model))
+            if request[0] == "assess":
+                answer = ("ok", assess_quality(request[1]))
+            else:
+                _, obj, img, size, model = request
+                answer = ("ok", calibrate_without_outlier_views(obj, img, size, model=model))
         except DtscalError as exc:
             answer = ("error", str(exc))
         except Exception as exc:  # numerical breakdown: a message for the UI, never a traceback
