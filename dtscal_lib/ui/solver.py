@@ -89,6 +89,16 @@ class SolverProcess:
         return self._ask(("assess", result))
 
 
+    def close(self) -> None:
+        if self._proc.poll() is None:
+            try:
+                self._proc.stdin.close()
+                self._proc.wait(timeout=3)
+            except (OSError, subprocess.TimeoutExpired):
+                self._proc.kill()
+                self._proc.wait(timeout=3)
+
+
 def assess_quality(result):
     """HOOK for the calibration's verdict: ``CalibrationResult.quality()`` (``dtscal_lib.quality``,
     issue 7b) when this kit has it, else None. A failing assessment gives its message (a str)."""
@@ -99,15 +109,6 @@ def assess_quality(result):
         return fn()
     except Exception as exc:  # the verdict is extra information: it must never lose the calibration
         return f"no verdict ({type(exc).__name__}: {exc})"
-
-    def close(self) -> None:
-        if self._proc.poll() is None:
-            try:
-                self._proc.stdin.close()
-                self._proc.wait(timeout=3)
-            except (OSError, subprocess.TimeoutExpired):
-                self._proc.kill()
-                self._proc.wait(timeout=3)
 
 
 def _serve() -> None:
