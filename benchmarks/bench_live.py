@@ -9,8 +9,9 @@ the same frames in the same run: a ROS-style loop, i.e. the same steps with ROS'
 Target: median >= 30 fps in both cases.
 
 Part 2, CALIBRATE with 40 samples while the recording plays at 30 fps into the live loop: its time
-(target < 1 s; baseline ``cv2.calibrateCamera`` on the same samples) and the longest gap between two
-displayed frames while it runs (target < 100 ms; the camera's own period is 33 ms).
+(target < 1 s; baseline ``cv2.calibrateCamera`` on the same samples, what ROS's calibrator runs) and
+the longest gap between two displayed frames while it runs (target < 100 ms; the camera's own period
+is 33 ms). Two sample sets: the first 40 of the recording, and 40 spread over all of it.
 
 Part 3, memory: the recording looped as fast as it decodes until the source has delivered 18,000
 frames (ten minutes of camera at 30 fps) through the live loop; RSS at the start and at the end.
@@ -118,17 +119,24 @@ def wait_for(cond, timeout: float) -> bool:
     return cond()
 
 
-def part_calibrate() -> dict:
-    # 40 samples from the recording, then the recording plays live (30 fps, looped) while CALIBRATE runs
+def part_calibrate(which: str) -> dict:
+    """CALIBRATE on 40 samples while the recording plays live (30 fps, looped) into the same calibrator.
+
+    ``which="first"``: the first 40 samples of the recording (they include a motion-blurred view, so
+    the solver iterates longer and then calibrates again without that outlier view); ``"spread"``:
+    40 samples spread over the whole recording.
+    """
     app = LiveCalibrator(str(BAG), realtime=True, loop=True, autostart=False)
     from dtscal_lib.sources import open_source
 
     for f in open_source(BAG):
         if f.ok:
             app.loop.step(f)
-        if app.tracker is not None and len(app.tracker.samples) >= 40:
+        if which == "first" and app.tracker is not None and len(app.tracker.samples) >= 40:
             break
-    app.tracker.samples = app.tracker.samples[:40]
+    samples = app.tracker.samples
+    keep = np.linspace(0, len(samples) - 1, 40).round().astype(int) if which == "spread" else range(40)
+    app.tracker.samples = [samples[i] for i in keep]
     obj, img = app.tracker.object_and_image_points()
     t0 = time.perf_counter()
     cv2.calibrateCamera([o.astype(np.float32) for o in obj], [i.astype(np.float32) for i in img], (640, 480),
@@ -140,15 +148,13 @@ def part_calibrate() -> dict:
     shown0 = app.loop.shown
     t0 = time.perf_counter()
     app.calibrate(wait=True)
-    t1 = time.perf_counter()
     assert app.result is not None, app.calibrate_error
-    gap = app.loop.longest_gap(t0)
     during = app.loop.shown - shown0
     time.sleep(0.5)  # the first frame after CALIBRATE closes the last gap
-    gap = max(gap, app.loop.longest_gap(t0))
+    gap = app.loop.longest_gap(t0)
     app.close()
-    return {"seconds": app.calibrate_seconds, "wall": t1 - t0, "baseline": baseline, "gap": gap,
-            "frames_during": during, "views": app.result.n_views}
+    return {"seconds": app.calibrate_seconds, "baseline": baseline, "gap": gap, "frames_during": during,
+            "views": app.result.n_views, "dropped": len(app.dropped), "which": which}
 
 
 def part_memory(n_frames: int) -> dict:
@@ -180,14 +186,16 @@ def main(argv=None) -> int:
               f"  {cpu_fps:24.1f} / {ros_cpu_fps:.1f}")
         ok &= fps >= TARGET_FPS
     print(f"  target: median >= {TARGET_FPS:g} fps in both (wall time; CPU-time fps is what one free core gives)")
-    c = part_calibrate()
-    print(f"Part 2: CALIBRATE with {c['views']} samples while the recording plays at 30 fps")
-    print(f"  calibration {c['seconds'] * 1e3:.0f} ms (cv2.calibrateCamera on the same samples "
-          f"{c['baseline'] * 1e3:.0f} ms, ratio {c['seconds'] / c['baseline']:.2f}x); "
-          f"target < {TARGET_CALIBRATE_S:g} s")
-    print(f"  frames displayed meanwhile: {c['frames_during']}; longest gap between displayed frames "
-          f"{c['gap'] * 1e3:.0f} ms; target < {TARGET_GAP_S * 1e3:.0f} ms")
-    ok &= c["seconds"] < TARGET_CALIBRATE_S and c["gap"] < TARGET_GAP_S
+    print("Part 2: CALIBRATE with 40 samples while the recording plays at 30 fps into the loop")
+    for which in ("first", "spread"):
+        c = part_calibrate(which)
+        label = "first 40 samples" if which == "first" else "40 samples spread over the recording"
+        print(f"  {label}: {c['seconds'] * 1e3:.0f} ms ({c['dropped']} outlier view(s) dropped); "
+              f"cv2.calibrateCamera on the same samples {c['baseline'] * 1e3:.0f} ms, ratio "
+              f"{c['seconds'] / c['baseline']:.2f}x; target < {TARGET_CALIBRATE_S:g} s")
+        print(f"    frames displayed meanwhile: {c['frames_during']}; longest gap between displayed frames "
+              f"{c['gap'] * 1e3:.0f} ms; target < {TARGET_GAP_S * 1e3:.0f} ms")
+        ok &= c["seconds"] < TARGET_CALIBRATE_S and c["gap"] < TARGET_GAP_S
     n = 3000 if args.quick else 18000
     m = part_memory(n)
     print(f"Part 3: memory over {m['received']} frames played as fast as possible ({m['seconds']:.0f} s, "
