@@ -128,9 +128,12 @@ class LiveExtrinsics:
         return src.camera()
 
     def _rectify(self, img, cam: CameraModel):
-        if self._maps_for is not cam and (self._maps_for is None or not (
-                np.array_equal(self._maps_for.K, cam.K) and np.array_equal(self._maps_for.dist, cam.dist))):
+        old = self._maps_for
+        same = old is not None and np.array_equal(old.K, cam.K) and np.array_equal(old.dist, cam.dist)
+        if old is not cam and not same:
             self._maps = cam.rectification_maps()
+            if old is not None:  # a new intrinsic calibration: fits made with the old one no longer count
+                self.reset_best()
         self._maps_for = cam
         return rectify_image(img, self._maps)
 
