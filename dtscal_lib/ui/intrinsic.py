@@ -189,20 +189,17 @@ class LiveCalibrator:
         arrival = getattr(frame, "arrival", None) or time.time()
         img = frame.image
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-            self.bad["odd_frame"] += 1
-            return
+            return self._skip("odd_frame")
         size = (img.shape[1], img.shape[0])
         with self._lock:
             if self.tracker is None:
                 self.tracker = CoverageTracker(self.board, size)
             if size != self.tracker.image_size:
-                self.bad["size_mismatch"] += 1
-                return
+                return self._skip("size_mismatch")
             try:
                 det = detect_board(img, self.board)
             except (DtscalError, cv2.error):
-                self.bad["detector_error"] += 1
-                return
+                return self._skip("detector_error")
             added = self.tracker.offer(det, frame.index) if det.found else False
             if added:
                 self.thumbs.append(render.thumbnail(img, det.corners))
@@ -228,6 +225,13 @@ class LiveCalibrator:
         if self.result is not None:
             self._show_preview(img)
 
+    def _skip(self, reason: str) -> None:
+        """Count a frame the calibrator cannot use; the count shows under the bars."""
+        self.bad[reason] += 1
+        n = len(self.tracker.samples) if self.tracker else 0
+        self.count.value = f"samples: {n}; frames skipped: " + ", ".join(
+            f"{k} {v}" for k, v in sorted(self.bad.items()))
+
     def _add_thumb(self, i: int) -> None:
         import ipywidgets as w
 
@@ -238,7 +242,11 @@ class LiveCalibrator:
         self.thumb_box.children = (*self.thumb_box.children, box)
 
     def _rebuild_thumbs(self) -> None:
-        self.thumb_box.children = ()
+        old, self.thumb_box.children = self.thumb_box.children, ()
+        for box in old:  # close the widgets too, or the kernel keeps their models
+            for child in box.children:
+                child.close()
+            box.close()
         for i in range(len(self.thumbs)):
             self._add_thumb(i)
 
