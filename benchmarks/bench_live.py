@@ -9,8 +9,9 @@ the same frames in the same run: a ROS-style loop, i.e. the same steps with ROS'
 Target: median >= 30 fps in both cases.
 
 Part 2, CALIBRATE with 40 samples while the recording plays at 30 fps into the live loop: its time
-(target < 1 s; baseline ``cv2.calibrateCamera`` on the same samples, what ROS's calibrator runs) and
-the longest gap between two displayed frames while it runs (target < 100 ms; the camera's own period
+(target < 1 s; baseline: ``cv2.calibrateCamera`` on the same samples in a thread of the process that
+shows the frames, as ROS's calibrator runs it, with its own longest gap) and the longest gap between
+two displayed frames while it runs (target < 100 ms; the camera's own period
 is 33 ms). Two sample sets: the first 40 of the recording, and 40 spread over all of it.
 
 Part 3, memory: the recording looped as fast as it decodes until the source has delivered 18,000
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -138,13 +140,18 @@ def part_calibrate(which: str) -> dict:
     keep = np.linspace(0, len(samples) - 1, 40).round().astype(int) if which == "spread" else range(40)
     app.tracker.samples = [samples[i] for i in keep]
     obj, img = app.tracker.object_and_image_points()
-    t0 = time.perf_counter()
-    cv2.calibrateCamera([o.astype(np.float32) for o in obj], [i.astype(np.float32) for i in img], (640, 480),
-                        None, None)
-    baseline = time.perf_counter() - t0
     app.prepare_calibration(wait=120)  # done by itself at the third sample, long before CALIBRATE
     app.loop.start()
     wait_for(lambda: app.loop.shown > 60, 30)
+    # baseline, ROS's way: cv2.calibrateCamera in a thread of the process that shows the frames
+    t0 = time.perf_counter()
+    job = threading.Thread(target=cv2.calibrateCamera, args=(
+        [o.astype(np.float32) for o in obj], [i.astype(np.float32) for i in img], (640, 480), None, None))
+    job.start()
+    job.join()
+    baseline = time.perf_counter() - t0
+    time.sleep(0.5)
+    baseline_gap = app.loop.longest_gap(t0)
     shown0 = app.loop.shown
     t0 = time.perf_counter()
     app.calibrate(wait=True)
@@ -154,6 +161,7 @@ def part_calibrate(which: str) -> dict:
     gap = app.loop.longest_gap(t0)
     app.close()
     return {"seconds": app.calibrate_seconds, "baseline": baseline, "gap": gap, "frames_during": during,
+            "baseline_gap": baseline_gap,
             "views": app.result.n_views, "dropped": len(app.dropped), "which": which}
 
 
@@ -191,10 +199,11 @@ def main(argv=None) -> int:
         c = part_calibrate(which)
         label = "first 40 samples" if which == "first" else "40 samples spread over the recording"
         print(f"  {label}: {c['seconds'] * 1e3:.0f} ms ({c['dropped']} outlier view(s) dropped); "
-              f"cv2.calibrateCamera on the same samples {c['baseline'] * 1e3:.0f} ms, ratio "
+              f"ROS-style cv2.calibrateCamera in a thread on the same samples {c['baseline'] * 1e3:.0f} ms, ratio "
               f"{c['seconds'] / c['baseline']:.2f}x; target < {TARGET_CALIBRATE_S:g} s")
         print(f"    frames displayed meanwhile: {c['frames_during']}; longest gap between displayed frames "
-              f"{c['gap'] * 1e3:.0f} ms; target < {TARGET_GAP_S * 1e3:.0f} ms")
+              f"{c['gap'] * 1e3:.0f} ms (ROS-style: {c['baseline_gap'] * 1e3:.0f} ms); "
+              f"target < {TARGET_GAP_S * 1e3:.0f} ms")
         ok &= c["seconds"] < TARGET_CALIBRATE_S and c["gap"] < TARGET_GAP_S
     n = 3000 if args.quick else 18000
     m = part_memory(n)

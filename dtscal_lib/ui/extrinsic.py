@@ -149,12 +149,12 @@ class LiveExtrinsics:
             text += f" (skipped frames: {bad})"
         self.status.value = render.message_html(text, "error" if st.state in ("ended", "error") else "info")
 
-    def _on_frame(self, frame) -> None:
+    def _on_frame(self, frame) -> bool | None:
         arrival = getattr(frame, "arrival", None) or time.time()
         img = frame.image
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
             self.bad["odd_frame"] += 1
-            return
+            return False
         self.frames_seen += 1
         cam = self.camera()
         if cam is None:
@@ -166,7 +166,7 @@ class LiveExtrinsics:
             return
         if (img.shape[1], img.shape[0]) != cam.size:
             self.bad["size_mismatch"] += 1
-            return
+            return False
         rect = self._rectify(img, cam)
         try:
             res = calibrate_extrinsics(img, cam, self.board)

@@ -20,7 +20,8 @@ class FrameLoop:
     Parameters
     ----------
     source : a started or unstarted live source (``latest``, ``status``, ``reconnect``, ``close``)
-    on_frame : called with each new good frame (in the loop thread)
+    on_frame : called with each new good frame (in the loop thread); returns False when it skipped
+        the frame (not displayed)
     on_status : called with the source's ``LiveStatus`` whenever its state or message changes
     """
 
@@ -74,12 +75,14 @@ class FrameLoop:
     def step(self, frame) -> None:
         """Process one frame now, in the caller's thread (the loop body; tests and benchmarks)."""
         try:
-            self.on_frame(frame)
+            shown = self.on_frame(frame) is not False  # a tool returns False for a frame it skipped
         except Exception as exc:  # one bad step is counted, never fatal
             self.errors[type(exc).__name__] += 1
             self.last_error = f"{type(exc).__name__}: {exc}"
-        self.shown += 1
-        self.display_times.append(time.perf_counter())
+            shown = False
+        if shown:
+            self.shown += 1
+            self.display_times.append(time.perf_counter())
 
     def _check_status(self) -> None:
         st = self.source.status

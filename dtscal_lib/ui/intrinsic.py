@@ -184,8 +184,8 @@ class LiveCalibrator:
             text += f" (skipped frames: {bad})"
         self.status.value = render.message_html(text, "error" if st.state in ("ended", "error") else "info")
 
-    def _on_frame(self, frame) -> None:
-        """The loop body: detect, offer to coverage, draw, encode, publish."""
+    def _on_frame(self, frame) -> bool | None:
+        """The loop body: detect, offer to coverage, draw, encode, publish (False: frame skipped)."""
         arrival = getattr(frame, "arrival", None) or time.time()
         img = frame.image
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
@@ -225,12 +225,13 @@ class LiveCalibrator:
         if self.result is not None:
             self._show_preview(img)
 
-    def _skip(self, reason: str) -> None:
-        """Count a frame the calibrator cannot use; the count shows under the bars."""
+    def _skip(self, reason: str) -> bool:
+        """Count a frame the calibrator cannot use (the count shows under the bars); returns False."""
         self.bad[reason] += 1
         n = len(self.tracker.samples) if self.tracker else 0
         self.count.value = f"samples: {n}; frames skipped: " + ", ".join(
             f"{k} {v}" for k, v in sorted(self.bad.items()))
+        return False
 
     def _add_thumb(self, i: int) -> None:
         import ipywidgets as w
