@@ -115,10 +115,6 @@ def _serve() -> None:
     from ..pipeline import calibrate_without_outlier_views
 
     out, inp = sys.stdout.buffer, sys.stdin.buffer
-    try:  # background work: when the CPU is contended, the live image goes first
-        os.nice(5)
-    except OSError:
-        pass
     _send(out, "ready")
     while True:
         try:
