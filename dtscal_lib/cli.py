@@ -49,9 +49,15 @@ def _print_json(obj) -> None:
     sys.stdout.write("\n")
 
 
+def _master(args) -> None:
+    if args.master_uri:  # the live source and the commit both talk to this master
+        os.environ["ROS_MASTER_URI"] = args.master_uri
+
+
 def cmd_calibrate_intrinsics(args) -> int:
     from .pipeline import calibrate_intrinsics
 
+    _master(args)
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
                                progress=_progress(not args.quiet, "frames"), max_seconds=args.max_seconds)
@@ -112,6 +118,7 @@ def cmd_calibrate_extrinsics(args) -> int:
     from . import calib_files
     from .pipeline import calibrate_extrinsics
 
+    _master(args)
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
                                out_dir=None if args.no_write or args.format != "classic" else args.out,
                                topic=args.topic, progress=_progress(not args.quiet, "frames"),

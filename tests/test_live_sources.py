@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import http.server
+import os
 import threading
 import time
 
@@ -379,8 +380,6 @@ def test_mjpeg_stream_url_ends_and_reconnects():
 
 def test_offline_commit_to_a_folder_that_cannot_be_written(tmp_path):
     """Writing camera_intrinsic/<ROBOT>.yaml fails: a clear error, the previous file intact, saving elsewhere works."""
-    import os
-
     calib = calib_files.IntrinsicCalibration.from_dict(dt.DEFAULT_INTRINSICS, "default")
     folder = tmp_path / "calibrations"
     previous = calib_files.save_intrinsics(calib, folder, "bot1")
@@ -401,3 +400,60 @@ def test_offline_commit_to_a_folder_that_cannot_be_written(tmp_path):
         target.chmod(0o755)
     assert previous.read_bytes() == before
     assert calib_files.save_intrinsics(calib, tmp_path / "elsewhere", "bot1").exists()
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+@pytest.mark.slow
+def test_memory_stays_flat_over_18000_frames(tmp_path):
+    """Ten minutes of a 30 fps camera, played as fast as possible: no queue, no image history.
+
+    Keeping the 18,000 frames (57.6 kB each here) would take about 1 GB; the resident size may
+    grow by 30 MB at most (allocator noise).
+    """
+    bag = _bag(tmp_path / "r.bag", 50)
+    with open_live(bag, realtime=False, loop=True) as cam:
+        after, early = -1, None
+        while cam.status.frames < 18_000:
+            f = cam.latest(after=after, timeout=5)
+            assert f is not None, cam.status
+            after = f.index
+            if early is None and cam.status.frames >= 2_000:
+                early = _rss_bytes()
+        late = _rss_bytes()
+        assert cam.status.state == "running" and cam.status.bad == {}
+    assert late - early < 30_000_000, (early, late)
+
+
+@pytest.mark.slow
+def test_cli_calibrates_from_a_webcam(monkeypatch, tmp_path, capsys):
+    """``--source device:0`` end to end; the webcam is stood in for by the recording's frames at 30 fps."""
+    frames = [data for _, _, data in datasets.read_bag_jpegs(datasets.session_dir() / "intrinsics.bag")]
+
+    class RecordedCamera(_FakeCamera):
+        def __init__(self):
+            super().__init__(len(frames))
+            self.t0 = time.monotonic()
+
+        def read(self):
+            i = int((time.monotonic() - self.t0) * 30)  # a camera delivers in real time
+            if i >= len(frames):
+                return False, None
+            time.sleep(1 / 60)
+            return True, cv2.imdecode(np.frombuffer(frames[i], np.uint8), cv2.IMREAD_COLOR)
+
+    monkeypatch.setattr(CaptureLive, "_open", lambda self: RecordedCamera())
+    out = tmp_path / "cal"
+    code = cli_main(["calibrate-intrinsics", "--source", "device:0", "--robot", "laptopcam", "--out", str(out),
+                     "--max-seconds", "60", "--json", "-q"])
+    assert code == 0
+    import json
+
+    run = json.loads(capsys.readouterr().out)
+    assert run["samples_used"] >= 15 and run["output"].endswith("camera_intrinsic/laptopcam.yaml")
+    K = calib_files.load_intrinsics(out / "camera_intrinsic" / "laptopcam.yaml").K
+    truth = np.asarray(datasets.load_truth()["camera"]["K"])
+    assert abs(K[0, 0] / truth[0, 0] - 1) < 0.01 and abs(K[1, 1] / truth[1, 1] - 1) < 0.01

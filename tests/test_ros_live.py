@@ -25,7 +25,15 @@ import numpy as np
 import pytest
 import test_live_sources
 import test_ros_bag_play
-from test_ros_bag_play import SYSTEM_PYTHON, _free_port, _log, _ros_tool, _run, _started, running_roscore
+from test_ros_bag_play import (
+    SYSTEM_PYTHON,
+    _free_port,
+    _log,
+    _ros_tool,
+    _run,
+    _started,
+    running_roscore,
+)
 
 from dtscal_lib import calib_files, datasets
 from dtscal_lib import duckietown as dt
@@ -131,7 +139,7 @@ def test_calibrate_from_live_topic_and_commit(roscore, camera_node, tmp_path):
     env = roscore
     out = tmp_path / "calibrations"
     run = _cli_on_live_topic(env, ["calibrate-intrinsics", "--commit", "--out", str(out), "--max-seconds", "150"],
-                             "intrinsics.bag", tmp_path, timeout=200)
+                             "intrinsics.bag", tmp_path, loop=True, timeout=200)  # a camera streams on
     assert run["robot"] == ROBOT and run["samples_used"] >= 20, run
     assert run["commit"].startswith("Write to ")
     robot_file = camera_node / "camera_intrinsic" / f"{ROBOT}.yaml"
@@ -298,6 +306,14 @@ def test_cli_extrinsics_from_live_topic_and_upload(roscore, file_server, tmp_pat
     assert run["commit"] == f"uploaded {local} to {url} (HTTP 200)"
     assert stored[url[len(base):]] == local.read_bytes()
     assert run["corner_residual_mm"]["max"] < 3.0, run
+    # against the truth: the board corners' rectified pixels (from the true homography, same P) to the ground
+    ext = datasets.load_truth()["extrinsics"]
+    ground = np.asarray(ext["ground_points"], float)
+    pix = np.linalg.inv(np.asarray(ext["homography"], float)) @ np.c_[ground, np.ones(len(ground))].T
+    back = np.asarray(run["homography"], float).reshape(3, 3) @ pix
+    err_mm = 1000 * np.linalg.norm((back[:2] / back[2]).T - ground, axis=1)
+    assert err_mm.max() < 3.0, f"worst corner {err_mm.max():.2f} mm"
+    print(f"extrinsics from the live topic: worst board corner {err_mm.max():.2f} mm from the truth")
 
 
 def test_cli_commit_without_service_keeps_the_written_file(roscore, tmp_path):
@@ -312,3 +328,17 @@ def test_cli_commit_without_service_keeps_the_written_file(roscore, tmp_path):
     assert f"{written} is kept" in res.stderr
     assert "calibrated nobot" in res.stdout and f"wrote {written}" in res.stdout  # the result was printed
     calib_files.load_intrinsics(written)  # the calibration itself was saved
+
+
+def test_corrupt_frames_over_ros_are_counted(roscore, tmp_path):
+    """JPEGs damaged on the way (cut short) arrive over ROS: counted by reason, never handed out."""
+    env = roscore
+    bag = test_live_sources._bag(tmp_path / "bad.bag", 10, fps=10, corrupt={2, 5, 6})  # on /testbot/camera_node/image/compressed
+    with open_live("ros:testbot", master_uri=env["ROS_MASTER_URI"]) as cam:
+        _wait(lambda: _subscribers(env, "/testbot/camera_node/image/compressed") > 0, 60, "the helper to subscribe")
+        play = _run([_ros_tool("rosbag"), "play", "--quiet", "-d", "0.5", bag], env)
+        assert play.returncode == 0, play.stdout + play.stderr
+        st = _wait(lambda: cam.status if cam.status.state == "ended" else None, 20, "the ended status")
+        assert st.frames == 10 and st.bad == {"corrupt_jpeg": 3}, st
+        last = cam.latest(timeout=0)
+        assert last is not None and last.ok and last.index == 9

@@ -30,6 +30,7 @@ folder, glob)           rate (``realtime=True``) or as fast as it decodes; ``loo
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import struct
@@ -40,6 +41,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 
@@ -142,18 +144,16 @@ class LiveSource:
     def describe(self) -> str:
         return self.spec
 
-    def __enter__(self) -> LiveSource:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def __del__(self):  # pragma: no cover - best effort
-        try:
+    def __del__(self):  # pragma: no cover - best effort at interpreter exit
+        with contextlib.suppress(Exception):
             self._stop.set()
             self._halt()
-        except Exception:
-            pass
 
     def __repr__(self) -> str:
         s = self.status
@@ -201,7 +201,7 @@ class LiveSource:
         except DtscalError as exc:
             if not stop.is_set():
                 self._set_state("error", f"{exc}; press Reconnect to try again")
-        except Exception as exc:  # a receiver bug must show as a status, never kill the notebook
+        except Exception as exc:  # noqa: BLE001 (a receiver bug must show as a status, never kill the notebook)
             if not stop.is_set():
                 self._set_state("error", f"{self.describe()} stopped: {type(exc).__name__}: {exc}; "
                                          "press Reconnect to try again")
@@ -320,7 +320,7 @@ class CaptureLive(LiveSource):
             return
         if self.kind == "device":
             self._set_state("error", f"{self.describe()} stopped sending frames (unplugged?); plug it back in "
-                                     "and press Reconnect; the samples so far are kept")
+                                     "and press Reconnect")
         else:
             self._set_state("ended", f"{self.describe()} ended or the connection dropped after {n} frames; "
                                      "press Reconnect to try again")
@@ -423,7 +423,7 @@ class RosLive(LiveSource):
         self.master = master_uri(master)
         self._python = ros_python()
         self._proc: subprocess.Popen | None = None
-        self._log = tempfile.TemporaryFile()
+        self._log = tempfile.TemporaryFile()  # noqa: SIM115 (the helper's stderr, open while the source lives)
 
     def describe(self) -> str:
         return f"{self.topic} on {self.master}"
@@ -472,7 +472,7 @@ class RosLive(LiveSource):
                 state = st.get("state")
                 if state == "error":
                     said_error = True
-                    self._set_state("error", st["message"] + "; the samples so far are kept")
+                    self._set_state("error", st["message"])
                 elif state == "waiting":
                     self._set_state("ended" if n else "connecting", st["message"])
                 elif state == "running" and self.status.state != "running":
@@ -541,9 +541,12 @@ class LiveFrames:
                     continue
                 st = cam.status
                 if st.state in ("ended", "error"):
-                    self.stopped = st.message
+                    self.stopped = (st.message.replace("press Reconnect", "run the command again")
+                                    .replace("Press Reconnect", "Run the command again"))
                     break
             self.bad = cam.status.bad
+        if after < 0 and self.stopped and not self.stopped.startswith("stopped"):
+            raise SourceError(f"no frame from {self.live.describe()}: {self.stopped}")
 
 
 # ---------------------------------------------------------------------- the one entry point

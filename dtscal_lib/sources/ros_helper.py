@@ -96,11 +96,11 @@ def subscribe(topic):
         if n:
             now = ("running", f"{topic} has {n} publisher(s) on {MASTER}")
         elif seen.is_set():
-            now = ("waiting", f"nobody publishes {topic} on {MASTER} any more (the bag ended or the camera node "
-                              "stopped); frames resume when it is back, or press Reconnect")
+            now = ("waiting", (f"nobody publishes {topic} on {MASTER} any more (the bag ended or the camera "
+                               "node stopped); frames resume when it is back, or press Reconnect"))
         else:
-            now = ("waiting", f"nobody publishes {topic} on {MASTER} yet: is the robot's camera node running? "
-                              "(`rostopic list` on the robot shows its topics)")
+            now = ("waiting", (f"nobody publishes {topic} on {MASTER} yet: is the robot's camera node running? "
+                               "(`rostopic list` on the robot shows its topics)"))
         if now != last:
             status(*now)
             last = now
