@@ -2,7 +2,7 @@
 
 With the robot standing on the board (Duckietown's placement, see :mod:`dtscal_lib.boards`),
 every frame is rectified with the intrinsic calibration, the board detected and the ground
-homography fitted (:func:`dtscal_lib.ground.calibrate_extrinsics`). The tool shows
+homography fitted (:func:`dtscal_lib.ground.extrinsics_from_image`). The tool shows
 
 * the rectified camera view with the detected corners,
 * a top view of the board: where the fitted homography puts each detected corner against
@@ -33,7 +33,7 @@ from .. import calib_files
 from ..boards import DUCKIETOWN_BOARD, Board, ground_points
 from ..camera import CameraModel, rectify_image
 from ..errors import DtscalError
-from ..ground import birdseye_view, calibrate_extrinsics, draw_ground_grid, pixel_to_ground
+from ..ground import birdseye_view, draw_ground_grid, extrinsics_from_image, pixel_to_ground
 from . import render
 from ..sources.live import open_live
 from .frameloop import FrameLoop
@@ -169,7 +169,7 @@ class LiveExtrinsics:
             return False
         rect = self._rectify(img, cam)
         try:
-            res = calibrate_extrinsics(img, cam, self.board)
+            res = extrinsics_from_image(img, cam, self.board)
         except DtscalError as exc:
             res, self.reason = None, str(exc)
         except cv2.error:
