@@ -57,7 +57,7 @@ from scipy.spatial import cKDTree
 
 from .boards import DUCKIETOWN_BOARD, Board
 from .duckietown import BORDER_MARGIN_PX
-from .errors import DtscalError, FrameError
+from .errors import DtscalError, FrameError, Reason
 
 #: OpenCV flags of ROS's calibrator (``FAST_CHECK`` is what the live calibrator adds)
 ROS_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
@@ -75,8 +75,8 @@ UPSCALE_REGION_SIDE = 240
 #: pieces of a split board are merged if they come within this many saddle spacings of the seed
 MERGE_REACH = 3.0
 
-REASON_NO_BOARD = "no_board"
-REASON_AT_BORDER = "at_border"
+REASON_NO_BOARD = Reason.NO_BOARD
+REASON_AT_BORDER = Reason.AT_BORDER
 
 
 @dataclass(frozen=True)

@@ -1,15 +1,18 @@
 """ROS 1 bags: read camera frames from them, write them.
 
-Reading uses ``rosbags`` (pure Python, no ROS install needed) with its ROS 1 Noetic type
-store. When ``rosbags`` refuses a bag because its index is missing (a file cut short, a
-recording that was killed) the tolerant sequential reader of :mod:`.bagformat` takes
-over: every message before the damage is still yielded, followed by one frame with
-error reason ``"truncated"`` that says how many frames were read.
+Messages are read by the bounded sequential reader of :mod:`.bagformat` (the one bag
+reader of the kit) and deserialized with ``rosbags``' ROS 1 Noetic type store (pure
+Python, no ROS install needed). ``rosbags`` reads the index only, for the topics and the
+message counts; when it refuses a bag because its index is missing (a file cut short, a
+recording that was killed) the sequential walk finds them instead. Every message before
+damage is still yielded, followed by one frame with error reason ``"truncated"`` (or
+``"too_large"`` for a decompression bomb) that says how many frames were read.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -17,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FrameError, SourceError
+from ..errors import FrameError, Reason, SourceError
 from .bagformat import MAGIC, RawConnection, RawMessage, ScanEnd, scan_bag
-from .decode import decode_image, raw_image_to_bgr
+from .decode import decode_image, describe_file_type, raw_image_to_bgr
 from .frame import Frame, FrameSource, error_frame
 
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
@@ -72,8 +75,10 @@ class BagInfo:
 def _check_bag_file(path: Path) -> None:
     if not path.exists():
         raise SourceError(f"bag file {str(path)!r} does not exist; check the path (relative paths start at {os.getcwd()})")
-    if path.is_dir():
-        raise SourceError(f"{str(path)!r} is a folder, not a ROS 1 bag file")
+    mode = path.stat().st_mode
+    if not stat.S_ISREG(mode):
+        raise SourceError(f"{str(path)!r} is {describe_file_type(mode)}, not a ROS 1 bag file; pass the recording "
+                          "saved as a file")
     try:
         with path.open("rb") as f:
             head = f.read(len(MAGIC))
@@ -226,7 +231,7 @@ class BagSource(FrameSource):
         try:
             msg = typestore.deserialize_ros1(data, self.msgtype)
         except Exception as err:  # noqa: BLE001 - any decoding failure is this frame's problem only
-            return error_frame(index, stamp, name, "unreadable",
+            return error_frame(index, stamp, name, Reason.UNREADABLE,
                                f"message {index} on {self.topic} is not a valid {_ros1_name(self.msgtype)} ({err})")
         hs = msg.header.stamp
         if hs.sec or hs.nanosec:
@@ -240,17 +245,6 @@ class BagSource(FrameSource):
             return Frame(index=index, stamp=stamp, image=None, error=err, name=name)
         return Frame(index=index, stamp=stamp, image=image, error=None, name=name)
 
-    def _messages_indexed(self) -> Iterator[tuple[bytes, int] | ScanEnd]:
-        from rosbags.rosbag1 import Reader
-
-        try:
-            with Reader(self.path) as reader:
-                conns = [c for c in reader.connections if c.topic == self.topic]
-                for _conn, time_ns, data in reader.messages(connections=conns):
-                    yield bytes(data), int(time_ns)
-        except Exception as err:  # noqa: BLE001 - damaged chunk under an intact index
-            yield ScanEnd("damaged", -1, f"reading stopped on damaged data ({type(err).__name__}: {err})")
-
     def _messages_sequential(self) -> Iterator[tuple[bytes, int] | ScanEnd]:
         wanted: set[int] = set()
         for item in scan_bag(self.path):
@@ -260,21 +254,22 @@ class BagSource(FrameSource):
             elif isinstance(item, RawMessage):
                 if item.conn_id in wanted:
                     yield item.data, item.time_ns
-            elif item.status != "complete":
+            elif item.status != "complete" and not (self.info.indexed and item.status == "no_index"):
                 yield item
 
     def __iter__(self) -> Iterator[Frame]:
         typestore = _typestore()
-        messages = self._messages_sequential() if self.info.end is not None else self._messages_indexed()
+        messages = self._messages_sequential()
         index = 0
         last_stamp = 0.0
         for item in messages:
             if isinstance(item, ScanEnd):
-                reason = "unreadable" if item.status == "damaged" else "truncated"
+                reason = {"damaged": Reason.UNREADABLE, "too_large": Reason.TOO_LARGE}.get(item.status, Reason.TRUNCATED)
                 what = {
                     "truncated": "is truncated (cut short)",
                     "no_index": "has no index (the recording was not closed, or the copy was cut short)",
                     "damaged": "is damaged",
+                    "too_large": "holds more data than the kit reads at once (a damaged or hostile file)",
                 }[item.status]
                 advice = ("run `rosbag reindex` on it to make it a normal bag, or copy the recording from the robot "
                           "again" if item.status == "no_index" else
