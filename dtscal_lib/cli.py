@@ -52,9 +52,12 @@ def _print_json(obj) -> None:
 def cmd_calibrate_intrinsics(args) -> int:
     from .pipeline import calibrate_intrinsics
 
+    from .pipeline import parse_image_size
+
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
-                               progress=_progress(not args.quiet, "frames"))
+                               progress=_progress(not args.quiet, "frames"),
+                               image_size=parse_image_size(args.image_size))
     if args.json:
         _print_json(run.to_dict())
     else:
@@ -173,6 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     common(sp)
     sp.add_argument("--model", choices=["plumb_bob", "radial2"], default="plumb_bob")
     sp.add_argument("--skew", action="store_true", help="also estimate the skew of K (own refinement)")
+    sp.add_argument("--image-size", metavar="WxH",
+                    help="size of the frames to calibrate (default: the size in which the board is found most)")
     sp.set_defaults(func=cmd_calibrate_intrinsics)
 
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")

@@ -48,6 +48,7 @@ class Reason(StrEnum):
     BOARD_ORDER = "board_order"              #: corners cannot be ordered on the ground
     CORRUPT_HOMOGRAPHY = "corrupt_homography"  #: fitted H breaks Duckietown's H[1][2] rule
     HORIZON = "horizon"                      #: the image centre lies on the horizon of H
+    HOMOGRAPHY_FAILED = "homography_failed"  #: no ground homography fits the corners of this frame
 
     @classmethod
     def of(cls, value) -> "Reason | str":
