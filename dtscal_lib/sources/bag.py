@@ -257,6 +257,36 @@ class BagSource(FrameSource):
             elif item.status != "complete" and not (self.info.indexed and item.status == "no_index"):
                 yield item
 
+    def compressed_images(self) -> Iterator[tuple[int, int, bytes]]:
+        """``(index, header stamp in ns, encoded bytes)`` of every message of a CompressedImage topic.
+
+        The raw payloads, undecoded, read by the same bounded reader as the frames.
+
+        Raises
+        ------
+        SourceError
+            The topic is not ``sensor_msgs/CompressedImage``, a message does not deserialize,
+            or the bag ends damaged or cut short.
+        """
+        if self.msgtype != COMPRESSED_IMAGE:
+            raise SourceError(f"topic {self.topic} of {self.path.name} carries {_ros1_name(self.msgtype)}, "
+                              "not sensor_msgs/CompressedImage")
+        typestore = _typestore()
+        index = 0
+        for item in self._messages_sequential():
+            if isinstance(item, ScanEnd):
+                raise SourceError(f"bag {self.path.name} ends badly after {index} messages of {self.topic}: "
+                                  f"{item.detail}")
+            data, time_ns = item
+            try:
+                msg = typestore.deserialize_ros1(data, self.msgtype)
+            except Exception as err:  # noqa: BLE001 - rosbags raises many types on malformed bytes
+                raise SourceError(f"message {index} on {self.topic} of {self.path.name} is not a valid "
+                                  f"CompressedImage ({type(err).__name__})") from None
+            stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+            yield index, stamp, bytes(msg.data)
+            index += 1
+
     def __iter__(self) -> Iterator[Frame]:
         typestore = _typestore()
         messages = self._messages_sequential()
