@@ -180,12 +180,14 @@ class VideoSource(FrameSource):
                         "damaged: copy or convert it again (e.g. `ffmpeg -i IN -c:v mjpeg OUT.avi`)",
                     )
                     return
-                if first_bad is not None:
-                    yield error_frame(
-                        first_bad, stamp, f"{self.path.name}#{first_bad}", Reason.VIDEO_DECODE_FAILED,
-                        f"video {self.path.name}: frames {first_bad} to {index - 1} could not be decoded ({why}); "
-                        f"decoding resumed at frame {index}",
-                    )
+                if first_bad is not None:  # one counted frame for each frame the decoder skipped
+                    for bad in range(first_bad, index):
+                        yield error_frame(
+                            bad, bad / self.fps if self.fps > 0 else stamp, f"{self.path.name}#{bad}",
+                            Reason.VIDEO_DECODE_FAILED,
+                            f"video {self.path.name}: frame {bad} could not be decoded ({why}); decoding resumed at "
+                            f"frame {index}",
+                        )
                     first_bad, why = None, ""
                 good += 1
                 if image.size == 0:
