@@ -19,10 +19,10 @@ caller to word.
 
 >>> load_yaml_text("a: &x [1, 2]\\nb: *x\\n", "demo.yaml")
 {'a': [1, 2], 'b': [1, 2]}
->>> load_yaml_text("a: 1\\na: 2\\n", "demo.yaml")
+>>> load_yaml_text("a: 1\\na: 2\\n", "demo.yaml")  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-dtscal_lib.errors.CalibrationFileError: demo.yaml: field 'a' appears twice (line 2); a calibration file names each field once: remove the duplicate
+dtscal_lib.errors.CalibrationFileError: demo.yaml: field 'a' appears twice (line 2); ...
 """
 
 from __future__ import annotations

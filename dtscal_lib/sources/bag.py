@@ -294,7 +294,8 @@ class BagSource(FrameSource):
         last_stamp = 0.0
         for item in messages:
             if isinstance(item, ScanEnd):
-                reason = {"damaged": Reason.UNREADABLE, "too_large": Reason.TOO_LARGE}.get(item.status, Reason.TRUNCATED)
+                reason = {"damaged": Reason.UNREADABLE,
+                          "too_large": Reason.TOO_LARGE}.get(item.status, Reason.TRUNCATED)
                 what = {
                     "truncated": "is truncated (cut short)",
                     "no_index": "has no index (the recording was not closed, or the copy was cut short)",

@@ -183,14 +183,19 @@ def decode_image(data: bytes | bytearray | memoryview | np.ndarray) -> np.ndarra
     if jpeg:
         problem = jpeg_scan_problem(raw)
         if problem is not None:
-            raise FrameError(Reason.CORRUPT_JPEG, f"JPEG of {len(raw)} bytes is damaged ({problem}); the frame is skipped")
+            raise FrameError(Reason.CORRUPT_JPEG,
+                             f"JPEG of {len(raw)} bytes is damaged ({problem}); the frame is skipped")
     buf = np.frombuffer(raw, dtype=np.uint8)
+    level = cv2.getLogLevel()
+    cv2.setLogLevel(0)  # silent: OpenCV would print its own copy of a decoder error on stderr
     try:
         image = cv2.imdecode(buf, cv2.IMREAD_COLOR)
     except cv2.error as err:
         detail = " ".join(str(err).split())[-160:]
         raise FrameError(Reason.DECODER_ERROR, f"OpenCV's decoder failed on a {header.format} of {len(raw)} bytes "
                                                f"({detail}); the frame is skipped") from None
+    finally:
+        cv2.setLogLevel(level)
     if image is None or image.size == 0:
         reason = Reason.CORRUPT_JPEG if jpeg else Reason.CORRUPT_IMAGE
         raise FrameError(reason, f"{header.format} of {len(raw)} bytes is damaged and cannot be decoded; "
@@ -239,7 +244,8 @@ def raw_image_to_bgr(height: int, width: int, encoding: str, step: int, data: by
         raise FrameError(Reason.EMPTY, f"raw image has size {width}x{height}")
     check_dimensions(width, height, f"raw {encoding} image")
     if step < width * channels:
-        raise FrameError(Reason.CORRUPT_IMAGE, f"raw image row step {step} is smaller than width*channels = {width * channels}")
+        raise FrameError(Reason.CORRUPT_IMAGE,
+                         f"raw image row step {step} is smaller than width*channels = {width * channels}")
     buf = np.frombuffer(bytes(data) if not isinstance(data, np.ndarray) else data.astype(np.uint8).tobytes(), np.uint8)
     if buf.size < step * height:
         raise FrameError(Reason.TRUNCATED, f"raw image has {buf.size} bytes, expected step*height = {step * height}")
