@@ -106,7 +106,7 @@ def test_hostile_frames_in_a_folder_are_counted_and_skipped(tmp_path, good_jpegs
     assert rejected.get("too_large", 0) >= 5, rejected
     assert rejected.get("not_a_file") == 2, rejected
     assert frames["used"] + rejected.get("outlier_view", 0) >= len(good_jpegs) - 1
-    assert doc["image_width"] == 640 and doc["image_height"] == 480
+    assert doc["image_size"] == [640, 480]
 
 
 @pytest.mark.slow
@@ -116,7 +116,7 @@ def test_a_thumbnail_sorted_first_does_not_set_the_frame_size(tmp_path, good_jpe
     doc, _ = _intrinsics_json("--source", folder)
     assert doc["frames"]["rejected"].get("size_mismatch") == 1
     assert doc["frames"]["used"] + doc["frames"]["rejected"].get("outlier_view", 0) == len(good_jpegs)
-    assert (doc["image_width"], doc["image_height"]) == (640, 480)
+    assert doc["image_size"] == [640, 480]
 
 
 # --------------------------------------------------------------------------- bags
