@@ -15,8 +15,8 @@ class Reason(StrEnum):
     A ``StrEnum``: each member *is* its string value, so ``Reason.NO_BOARD == "no_board"``,
     ``f"{Reason.NO_BOARD}"`` is ``"no_board"`` and JSON output shows the plain string.
 
-    >>> Reason.NO_BOARD == "no_board", str(Reason.TOO_LARGE)
-    (True, 'too_large')
+    >>> Reason.NO_BOARD == "no_board", str(Reason.TOO_LARGE), {Reason.EMPTY: 2}
+    (True, 'too_large', {'empty': 2})
     """
 
     # the bytes of a frame (sources)
@@ -49,6 +49,9 @@ class Reason(StrEnum):
     CORRUPT_HOMOGRAPHY = "corrupt_homography"  #: fitted H breaks Duckietown's H[1][2] rule
     HORIZON = "horizon"                      #: the image centre lies on the horizon of H
     HOMOGRAPHY_FAILED = "homography_failed"  #: no ground homography fits the corners of this frame
+
+    def __repr__(self) -> str:  # "'no_board'", so dicts of counts in messages read as plain text
+        return repr(self.value)
 
     @classmethod
     def of(cls, value) -> "Reason | str":

@@ -75,7 +75,8 @@ def open_source(spec: str | os.PathLike, *, topic: str | None = None) -> FrameSo
 
     def no_topic(kind: str) -> None:
         if topic is not None:
-            raise SourceError(f"topic={topic!r} only applies to ROS bags, but {text!r} is a {kind}; drop topic=")
+            raise SourceError(f"--topic {topic!r} only applies to ROS bags, but {text!r} is a {kind}; drop --topic "
+                              "(topic= in Python)")
 
     if not path.exists():
         if _GLOB_CHARS & set(text):
