@@ -296,7 +296,7 @@ def calibrate_extrinsics(image: np.ndarray, camera: CameraModel, board: Board = 
         )
     rectified = rectify_image(frame, camera.rectification_maps())
     corners, reason = _find_corners(rectified, board)
-    if reason == "at_border":
+    if reason == Reason.AT_BORDER:
         raise CalibrationError(
             f"the board ({board.describe()}) was found but some corners are within {dt.BORDER_MARGIN_PX} px "
             "of the rectified image's edge; place the robot on the board as instructed, centred, so that "
