@@ -6,6 +6,7 @@ Every error the kit raises on bad input derives from :class:`DtscalError` (itsel
 
 from __future__ import annotations
 
+import re
 from enum import StrEnum
 
 
@@ -103,3 +104,16 @@ class FrameError(DtscalError):
         super().__init__(message)
         #: short machine-readable reason (a :class:`Reason`), used as a key in rejection counts
         self.reason = Reason.of(reason)
+
+
+def opencv_message(err: BaseException, limit: int = 200) -> str:
+    """The useful part of a ``cv2.error`` (what failed, in which function), on one line.
+
+    >>> opencv_message(Exception("OpenCV(4.12.0) /io/x/resize.cpp:4214: error: (-215:Assertion failed) "
+    ...                          "!dsize.empty() in function 'resize'\\n"))
+    "(-215:Assertion failed) !dsize.empty() in function 'resize'"
+    """
+    text = " ".join(str(err).split())
+    m = re.search(r"error: (\(.*)", text)
+    text = m.group(1) if m else text
+    return text if len(text) <= limit else text[: limit - 1] + "…"

@@ -23,7 +23,7 @@ from .boards import DUCKIETOWN_BOARD, Board
 from .calibration import CalibrationResult, calibrate
 from .coverage import CoverageTracker
 from .detect import detect_board
-from .errors import CalibrationError, DtscalError, Reason
+from .errors import CalibrationError, DtscalError, Reason, opencv_message
 from .sources import Frame, open_source
 from .sources.headers import MAX_PIXELS, MAX_SIDE
 
@@ -346,7 +346,7 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
             continue
         except cv2.error as exc:  # OpenCV choking on one odd frame must not end the run
             tally.reject(Reason.DETECTOR_ERROR)
-            last_error = " ".join(str(exc).split())[-160:]
+            last_error = opencv_message(exc)
             continue
         tally.used += 1
         run = ExtrinsicRun(robot_name, res.H, frame.index, tally, np.asarray(res.residual_mm),

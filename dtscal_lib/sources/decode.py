@@ -23,7 +23,7 @@ import stat
 import cv2
 import numpy as np
 
-from ..errors import FrameError, Reason
+from ..errors import FrameError, Reason, opencv_message
 from .headers import JPEG_SOI, MAX_PIXELS, MAX_SIDE, check_dimensions, read_header
 
 JPEG_EOI = b"\xff\xd9"
@@ -191,7 +191,7 @@ def decode_image(data: bytes | bytearray | memoryview | np.ndarray) -> np.ndarra
     try:
         image = cv2.imdecode(buf, cv2.IMREAD_COLOR)
     except cv2.error as err:
-        detail = " ".join(str(err).split())[-160:]
+        detail = opencv_message(err)
         raise FrameError(Reason.DECODER_ERROR, f"OpenCV's decoder failed on a {header.format} of {len(raw)} bytes "
                                                f"({detail}); the frame is skipped") from None
     finally:

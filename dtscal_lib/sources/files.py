@@ -9,7 +9,7 @@ from pathlib import Path
 
 import cv2
 
-from ..errors import FrameError, Reason, SourceError
+from ..errors import FrameError, Reason, SourceError, opencv_message
 from .decode import decode_image, read_image_file
 from .headers import check_dimensions
 from .frame import Frame, FrameSource, error_frame, natural_key
@@ -161,7 +161,7 @@ class VideoSource(FrameSource):
                 try:
                     ok, image = cap.read()
                 except cv2.error as err:
-                    ok, image, why = False, None, " ".join(str(err).split())[-120:]
+                    ok, image, why = False, None, opencv_message(err)
                 stamp = index / self.fps if self.fps > 0 else float(pos_ms) / 1000.0
                 name = f"{self.path.name}#{index}"
                 if not ok or image is None:
