@@ -185,7 +185,8 @@ def choose_image_topic(info: BagInfo, topic: str | None, bag_name: str) -> str:
     if len(images) == 1:
         return images[0]
     choices = camera or images
-    raise SourceError(f"{bag_name} has several image topics ({', '.join(choices)}); choose one with --topic (topic= in Python)")
+    raise SourceError(f"{bag_name} has several image topics ({', '.join(choices)}); choose one with --topic "
+                      "(topic= in Python)")
 
 
 class BagSource(FrameSource):
