@@ -21,6 +21,7 @@ import numpy as np
 from . import calib_files
 from .boards import DUCKIETOWN_BOARD, Board
 from .calibration import CalibrationResult, calibrate
+from .camera import as_size
 from .coverage import CoverageTracker
 from .detect import detect_board
 from .errors import CalibrationError, DtscalError, Reason, opencv_message
@@ -141,7 +142,7 @@ class SizeGroups:
 
     def __init__(self, board: Board, image_size: tuple[int, int] | None = None):
         self.board = board
-        self.image_size = None if image_size is None else (int(image_size[0]), int(image_size[1]))
+        self.image_size = None if image_size is None else as_size(image_size, name="image_size")
         self.groups: dict[tuple[int, int], _SizeGroup] = {}
 
     def group(self, img: np.ndarray) -> _SizeGroup:
@@ -241,6 +242,8 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     for frame, img in usable_images(frames, tally):
         group = groups.group(img)
         group.tally.total += 1
+        if groups.image_size not in (None, group.tracker.image_size):
+            continue  # not the requested size: no detection, counted as size_mismatch at the end
         try:
             det = detect_board(img, board)
         except DtscalError as exc:  # a frame the detector cannot take: count it, go on

@@ -119,6 +119,14 @@ def test_a_thumbnail_sorted_first_does_not_set_the_frame_size(tmp_path, good_jpe
     assert doc["image_size"] == [640, 480]
 
 
+def test_a_requested_image_size_that_no_frame_has_is_refused_with_the_sizes_seen(tmp_path, good_jpegs):
+    thumb = cv2.imencode(".png", np.full((1, 1, 3), 128, np.uint8))[1].tobytes()
+    folder = _folder(tmp_path, good_jpegs[:2], {"000_thumbnail.png": thumb})
+    message = _refused("calibrate-intrinsics", "--source", folder, "--image-size", "320x240", "--robot", "x",
+                       "--no-write", "-q", expect="no frame has the requested image size 320x240")
+    assert "640x480" in message and "1x1" in message
+
+
 # --------------------------------------------------------------------------- bags
 @pytest.mark.slow
 def test_hostile_frames_in_a_bag_are_counted_and_skipped(tmp_path, good_jpegs):
