@@ -9,6 +9,7 @@ hostile input goes through: a subprocess whose address space is limited with
 from __future__ import annotations
 
 import bz2
+import os
 import struct
 import subprocess
 import sys
@@ -31,6 +32,8 @@ soft, hard = resource.getrlimit(resource.RLIMIT_AS)
 assert soft == cap and hard == cap, (soft, hard)
 sys.stderr.write("[address-space cap in force: %d bytes]\\n" % soft)
 sys.stderr.flush()
+import cv2
+cv2.setNumThreads(1)  # a many-core machine must not spend the cap on per-thread stacks and arenas
 if sys.argv[2] == "--script":
     sys.argv = sys.argv[3:]
     runpy.run_path(sys.argv[0], run_name="__main__")
@@ -47,7 +50,8 @@ def run_capped(args, *, timeout: float = 300, cwd=None, script: str | None = Non
     """
     cmd = [sys.executable, "-c", _RUNNER, str(CAP_BYTES)]
     cmd += ["--script", script, *map(str, args)] if script else [*map(str, args)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd)
+    env = dict(os.environ, MALLOC_ARENA_MAX="2", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd, env=env)
     assert CAP_BANNER.format(CAP_BYTES) in proc.stderr, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr and "Traceback" not in proc.stdout, proc.stderr[-4000:]
     return proc
