@@ -7,7 +7,8 @@ keeps the last value. :func:`load_yaml_file` adds the limits a calibration file 
 
 * the file is a regular file (never a FIFO or a device) of at most :data:`MAX_FILE_BYTES`;
 * the document, with every alias expanded, has at most :data:`MAX_NODES` nodes (harmless
-  aliases still load; an alias bomb is refused before anything is built);
+  aliases still load; an alias bomb is refused before anything is built) and nests at most
+  :data:`MAX_DEPTH` levels deep;
 * no scalar is longer than :data:`MAX_SCALAR_CHARS`; integers have at most
   :data:`MAX_INT_DIGITS` digits and floats are range-checked before conversion;
 * no mapping repeats a key.
@@ -41,6 +42,8 @@ from .errors import CalibrationFileError
 MAX_FILE_BYTES = 64 * 1024
 #: most nodes in a document, every alias counted as the size of what it refers to
 MAX_NODES = 10_000
+#: deepest nesting of lists and mappings (a calibration file nests 2 deep; PyYAML composes recursively)
+MAX_DEPTH = 32
 #: longest scalar (string or number) in characters
 MAX_SCALAR_CHARS = 4096
 #: most digits of an integer (a 64-bit integer has 20)
@@ -80,10 +83,19 @@ class _BoundedLoader(yaml.SafeLoader):
         super().__init__(stream)
         self.where = where
         self.sizes: dict[int, int] = {}
+        self.depth = 0
 
     def compose_node(self, parent, index):
         alias = self.check_event(yaml.AliasEvent)
-        node = super().compose_node(parent, index)
+        if self.depth >= MAX_DEPTH:
+            mark = self.peek_event().start_mark
+            raise _fail(self.where, f"the YAML document nests more than {MAX_DEPTH} levels deep (line {mark.line + 1}); "
+                                    "a calibration file nests 2 levels: fix the file or restore it from default.yaml")
+        self.depth += 1
+        try:
+            node = super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
         if alias:
             size = self.sizes.get(id(node))
             if size is None:

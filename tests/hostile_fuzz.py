@@ -124,7 +124,8 @@ def fuzz_bag(base, edits, cut, chunk):
 YAML_BASE = hostile.intrinsic_yaml()
 TOKENS = ["&a ", "*a", "&b [*a, *a, *a, *a]", "<<: *a\n", "9" * 50, "9" * 5000, "1e999", "-.inf", ".nan", ": ",
           "\n", "- ", "[", "]", "{", "}", "'", '"', "!!python/object/apply:os.system ['true']", "!!binary aGk=",
-          "image_width: 320\n", "? ", "\t", "#", "0x" + "f" * 40, "1:2:3:4:5", "~", "%YAML 1.1\n---\n"]
+          "image_width: 320\n", "? ", "\t", "#", "0x" + "f" * 40, "1:2:3:4:5", "~", "%YAML 1.1\n---\n",
+          "[" * 3000, "{a: " * 3000, "]" * 3000]
 
 
 @given(inserts=st.lists(st.tuples(st.integers(0, len(YAML_BASE)), st.sampled_from(TOKENS) | st.text(max_size=8)),

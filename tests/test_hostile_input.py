@@ -297,6 +297,11 @@ def test_a_huge_integer_in_a_matrix_is_refused_by_name(tmp_path):
     _extrinsics_with(tmp_path, text, "camera_matrix.rows")
 
 
+@pytest.mark.parametrize("nest", ["[" * 5000 + "]" * 5000, "{a: " * 5000 + "1" + "}" * 5000])
+def test_deep_nesting_is_refused_without_recursion_error(tmp_path, nest):
+    _extrinsics_with(tmp_path, hostile.intrinsic_yaml() + f"extra: {nest}\n", "nests more than")
+
+
 def test_duplicate_keys_are_refused(tmp_path):
     text = hostile.intrinsic_yaml() + "image_width: 320\n"
     _extrinsics_with(tmp_path, text, "'image_width' appears twice")
