@@ -170,8 +170,10 @@ def choose_image_topic(info: BagInfo, topic: str | None, bag_name: str) -> str:
         hint = f"pass one of: {', '.join(images)}" if images else "this bag has no image topic at all"
         raise SourceError(f"topic {topic!r} is not in {bag_name}; {hint}. All topics: {listing}")
     if not images and info.end is not None and info.end.status != "complete":
+        what = {"too_large": "holds more data than the kit reads at once", "damaged": "is damaged"}.get(
+            info.end.status, "is cut short")
         raise SourceError(
-            f"{bag_name} is cut short before any camera topic could be read ({info.end.detail}; topics found: "
+            f"{bag_name} {what} before any camera topic could be read ({info.end.detail}; topics found: "
             f"{listing}); copy the recording from the robot again"
         )
     if not images:

@@ -284,6 +284,7 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
             raise ValueError(f"{path.name} does not start with {MAGIC!r}; it is not a ROS 1 (v2.0) bag")
         index_pos = 0
         saw_index = False
+        chunk_count = chunk_infos = 0  # the index ends with one chunk-info record per chunk
         saw_chunk = False
         seen_conn: set[int] = set()
         while True:
@@ -301,7 +302,10 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
                 return
             if rec is None:
                 # an empty bag (no chunks) has an empty index: nothing to miss
-                if saw_index or (index_pos > 0 and not saw_chunk):
+                if saw_index and chunk_infos < chunk_count:
+                    yield ScanEnd("truncated", offset, f"the file ends at byte {size} inside its index ({chunk_infos} "
+                                                       f"of {chunk_count} chunk records); every message was read")
+                elif saw_index or (index_pos > 0 and not saw_chunk):
                     yield ScanEnd("complete", offset, "read the whole bag")
                 else:
                     yield ScanEnd("no_index", offset, f"the file ends at byte {size} without the index a closed recording has")
@@ -309,8 +313,13 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
             fields, data, complete = rec
             try:
                 op = _op(fields)
+                if not complete and op != OP_CHUNK:  # a partial chunk still gives its records; others nothing
+                    yield ScanEnd("truncated", offset, f"the file ends inside a record that starts at byte {offset} "
+                                                       f"of {size}")
+                    return
                 if op == OP_BAG_HEADER:
                     index_pos = _uint(fields, "index_pos")
+                    chunk_count = _uint(fields, "chunk_count") if "chunk_count" in fields else 0
                 elif op == OP_CHUNK:
                     saw_chunk = True
                     compression = fields.get("compression", b"none").decode("ascii", "replace")
@@ -342,6 +351,7 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
                         yield RawMessage(_uint(fields, "conn"), _time_ns(fields), data)
                 elif op == OP_CHUNK_INFO:
                     saw_index = True
+                    chunk_infos += 1
             except _Garbage as err:
                 yield ScanEnd("damaged", offset, f"the record at byte {offset} is damaged ({err})")
                 return
