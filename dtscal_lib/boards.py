@@ -70,7 +70,7 @@ class Board:
         return (0, c - 1, c * r - 1, c * (r - 1))
 
     def describe(self) -> str:
-        return f"{self.cols}x{self.rows} inner corners, {self.square:g} squares"
+        return f"{self.cols}x{self.rows} inner corners, {self.square * 1000:g} mm squares"
 
 
 #: the Duckietown calibration board: 8x6 squares, 7x5 inner corners, 31 mm squares

@@ -43,7 +43,9 @@ import math
 import os
 import re
 import shutil
+import stat
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -70,6 +72,12 @@ INTRINSIC_KEYS = ("image_width", "image_height", "camera_name", "camera_matrix",
                   "distortion_coefficients", "rectification_matrix", "projection_matrix")
 
 _ROBOT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+#: longest robot name: a hostname label (Duckiebots are named by their hostname); the
+#: kit's longest file name for it, the backup's temporary ``.NAME.rejected.yaml.bak.XXXXXXXX.tmp``,
+#: then stays far below every filesystem's 255-byte limit
+MAX_ROBOT_NAME = 63
+#: ``NAME.rejected.yaml`` keeps a refused calibration beside ``NAME.yaml`` (``--keep-anyway``)
+REJECTED_SUFFIX = ".rejected"
 # tolerances of the plausibility checks
 _ROT_TOL = 1e-6
 _MAX_SKEW_RATIO = 0.05   # |s| / fx
@@ -81,14 +89,26 @@ def check_robot_name(robot: str) -> str:
     """Validate a robot name for writing its calibration; returns it (``default`` is refused)."""
     if not isinstance(robot, str) or not robot:
         raise CalibrationFileError(f"robot name must be a non-empty string, got {robot!r}; pass --robot NAME")
-    if robot == dt.DEFAULT_NAME:
+    if robot.lower() == dt.DEFAULT_NAME:  # default.yaml, also on a case-insensitive filesystem
         raise CalibrationFileError(
-            "default.yaml is the factory calibration and is never overwritten; pass --robot NAME"
+            f"--robot {robot}: default.yaml is the factory calibration and is never overwritten; pass --robot NAME "
+            "(robot names are compared ignoring case)"
         )
     if not _ROBOT_NAME.fullmatch(robot) or ".." in robot:
         raise CalibrationFileError(
-            f"robot name {robot!r} is not valid: use letters, digits, '_', '-' and '.', without path "
+            f"robot name {robot[:80]!r} is not valid: use letters, digits, '_', '-' and '.', without path "
             "separators or '..' (the name of the Duckiebot, e.g. --robot autobot01)"
+        )
+    if len(robot) > MAX_ROBOT_NAME:
+        raise CalibrationFileError(
+            f"robot name {robot[:20]}... has {len(robot)} characters; at most {MAX_ROBOT_NAME} (a hostname) are "
+            "allowed, so that the file, its backup and their temporary names fit the filesystem: pass a "
+            "shorter --robot NAME"
+        )
+    if robot.lower().endswith(REJECTED_SUFFIX):
+        raise CalibrationFileError(
+            f"--robot {robot}: names ending in {REJECTED_SUFFIX!r} are kept for refused calibrations "
+            f"(NAME{REJECTED_SUFFIX}.yaml); pass the robot's own name"
         )
     return robot
 
@@ -465,12 +485,75 @@ def _dump(doc: dict) -> str:
     return yaml.safe_dump(doc, default_flow_style=None, sort_keys=False, width=4096)
 
 
+#: a temporary file of the kit older than this (seconds) belongs to a killed writer
+STALE_TMP_SECONDS = 300
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where Linux allows."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: the classic read-and-restore
+    os.umask(mask)
+    return mask
+
+
+def _take_rights(fd: int, path: Path) -> None:
+    """Give the new file ``path``'s mode (and owner, where allowed), or the umask's mode if it is new.
+
+    ``mkstemp`` creates 0600; a calibration replaced on a shared robot or course folder must stay
+    readable by whoever could read it before.
+    """
+    if not hasattr(os, "fchmod"):  # not POSIX: the platform's defaults apply
+        return
+    try:
+        st = os.stat(path)
+    except OSError:
+        os.fchmod(fd, 0o666 & ~_umask())
+        return
+    os.fchmod(fd, stat.S_IMODE(st.st_mode))
+    if hasattr(os, "fchown") and (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
+        try:
+            os.fchown(fd, st.st_uid, st.st_gid)
+        except OSError:  # only root may give files away; the mode is kept all the same
+            pass
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Remove temporary files a killed writer of ``path`` left (``.NAME[.bak].XXXXXXXX.tmp``)."""
+    pattern = re.compile(r"\." + re.escape(path.name) + r"(\.bak)?\.[a-z0-9_]{8}\.tmp")
+    now = time.time()
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return
+    for e in entries:
+        if pattern.fullmatch(e.name):
+            try:
+                old = now - e.stat(follow_symlinks=False).st_mtime > STALE_TMP_SECONDS
+                if old and e.is_file(follow_symlinks=False):
+                    os.unlink(e.path)
+            except OSError:
+                pass
+
+
 def _atomic_write(path: Path, text: str, *, backup: bool = True) -> Path:
-    """Write ``text`` to ``path`` atomically; keep the previous file as ``path.bak``."""
+    """Write ``text`` to ``path`` atomically; keep the previous file as ``path.bak``.
+
+    The new file keeps the previous file's mode (a new one follows the umask), and stale
+    temporary files of earlier, killed writes are removed.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_temporaries(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
+            _take_rights(f.fileno(), path)
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
@@ -515,25 +598,32 @@ def _write(path: Path, doc: dict, backup: bool = True) -> Path:
                                    "Check that the folder exists and is writable") from e
 
 
-def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str) -> Path:
+def _target(path: Path, rejected: bool) -> Path:
+    """``NAME.yaml``, or ``NAME.rejected.yaml`` beside it for a calibration kept against the kit's doubts."""
+    return path.with_name(path.stem + REJECTED_SUFFIX + path.suffix) if rejected else path
+
+
+def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """Write ``out_dir/camera_intrinsic/<robot>.yaml`` atomically (previous one kept as ``.bak``).
 
-    Refuses ``robot == "default"``: the factory file is never overwritten.
+    Refuses ``robot == "default"``: the factory file is never overwritten. ``rejected``
+    writes ``<robot>.rejected.yaml`` instead, leaving ``<robot>.yaml`` alone.
     """
     check_robot_name(robot)
     if not isinstance(calib, IntrinsicCalibration):
         raise CalibrationFileError(f"save_intrinsics needs an IntrinsicCalibration, got {type(calib).__name__}")
-    return _write(intrinsic_path(out_dir, robot), calib.to_dict())
+    return _write(_target(intrinsic_path(out_dir, robot), rejected), calib.to_dict())
 
 
-def save_extrinsics(H, out_dir, robot: str) -> Path:
+def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """Write ``out_dir/camera_extrinsic/<robot>.yaml`` (``homography: [9 floats]``) atomically.
 
     ``H`` (3, 3) maps rectified pixels to ground metres; it is validated (finite,
     non-singular, not corrupt) before anything is written. Refuses ``robot == "default"``.
+    ``rejected`` writes ``<robot>.rejected.yaml`` instead, leaving ``<robot>.yaml`` alone.
     """
     check_robot_name(robot)
-    path = extrinsic_path(out_dir, robot)
+    path = _target(extrinsic_path(out_dir, robot), rejected)
     H = validate_homography(H, f"{path} (not written)")
     return _write(path, {"homography": [_plain(v) for v in H.ravel()]})
 
@@ -560,3 +650,95 @@ def write_defaults(out_dir) -> list[Path]:
         validate_homography(dt.DEFAULT_HOMOGRAPHY, "duckietown.DEFAULT_HOMOGRAPHY")
         written.append(_write(ep, {"homography": list(dt.DEFAULT_HOMOGRAPHY)}, backup=False))
     return written
+
+
+# --------------------------------------------------------------------------- extrinsic file formats
+#: the comment header Duckietown's current library (lib-dt-computer-vision) writes above a version-2 file
+V2_HEADER = ("# IMPORTANT: Do not use this homography directly with your images. The homography in this file is\n"
+             "#            stored in a resolution-independent format (version 2, written by dtscal).\n")
+
+
+def _v2_frame(calib: IntrinsicCalibration) -> tuple[np.ndarray, np.ndarray]:
+    """``(Kp, Hv2i)`` of the rectified camera ``P``: pixel->vector and vector->[0, 1] image coordinates."""
+    Kp = np.array(calib.P[:, :3], dtype=np.float64)
+    fx, fy, cx, cy = Kp[0, 0], Kp[1, 1], Kp[0, 2], Kp[1, 2]
+    tl = np.array([-cx / fx, -cy / fy])
+    br = np.array([(calib.width - 1 - cx) / fx, (calib.height - 1 - cy) / fy])
+    sx, sy = 1.0 / (br - tl)
+    return Kp, np.array([[sx, 0, -tl[0] * sx], [0, sy, -tl[1] * sy], [0, 0, 1.0]])
+
+
+def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
+    """Classic homography (rectified pixel -> ground m) -> the 3x3 matrix of a version-2 file.
+
+    Mirrors lib-dt-computer-vision: its tool fits ``H_v`` from normalized image vectors
+    ``Kp^-1 [u, v, 1]`` of the rectified image to the ground and stores ``inv(Hv2i) @ H_v``
+    (``ResolutionDependentHomography.camera_independent``); its reader undoes exactly that
+    (``camera_specific``: ``Hv2i @ F``). ``Kp`` is the rectified camera (``P[:, :3]``).
+    """
+    Kp, Hv2i = _v2_frame(calib)
+    Hv = validate_homography(H, "classic homography") @ Kp
+    return np.linalg.inv(Hv2i) @ (Hv / Hv[2, 2])
+
+
+def extrinsic_from_v2(F, calib: IntrinsicCalibration, where: str = "version-2 homography") -> np.ndarray:
+    """The 3x3 matrix of a version-2 file -> classic homography (rectified pixel -> ground m), ``H[2,2] = 1``."""
+    F = np.asarray(F, dtype=np.float64)
+    if F.size != 9 or not np.all(np.isfinite(F)):
+        raise _fail(where, "a version-2 homography is 3 rows of 3 finite numbers")
+    Kp, Hv2i = _v2_frame(calib)
+    H = (Hv2i @ F.reshape(3, 3)) @ np.linalg.inv(Kp)
+    if abs(H[2, 2]) < 1e-12:
+        raise _fail(where, "maps the image to points at infinity; recalibrate the extrinsics")
+    return validate_homography(H / H[2, 2], where)
+
+
+def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | None]:
+    """Read a classic or version-2 ``camera_extrinsic`` file as ``(H, format, date)``.
+
+    ``H`` is always the classic homography (rectified pixel -> ground metres); ``format`` is
+    ``"classic"`` or ``"2"``; ``date`` the file's ISO date (None for classic). A version-2 file
+    needs ``intrinsics`` (an :class:`IntrinsicCalibration` or the path of one) to be converted.
+    """
+    doc, where = _read_yaml(path)
+    if "version" not in doc:
+        return load_extrinsics(path), "classic", None
+    if str(doc["version"]).strip() != "2":
+        raise _fail(where, f"extrinsic file version {doc['version']!r} is not supported (classic or '2')")
+    rows = doc.get("homography")
+    if not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)):
+        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers")
+    F = [[_number(v, where, f"homography[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
+    if intrinsics is None:
+        raise _fail(where, "is a version-2 (resolution-independent) file; pass the robot's intrinsic file "
+                           "to convert it (--intrinsics camera_intrinsic/ROBOT.yaml)")
+    calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
+    date = doc.get("date")
+    return extrinsic_from_v2(F, calib, where), "2", None if date is None else str(date)
+
+
+def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None) -> Path:
+    """Write ``camera_extrinsic/<robot>.yaml`` in the classic format (default) or as version ``"2"``.
+
+    ``H`` is the classic homography; ``fmt="2"`` needs ``intrinsics`` (object or path) and stamps
+    ``date`` (default now, ISO 8601).
+    """
+    if fmt == "classic":
+        return save_extrinsics(H, out_dir, robot)
+    if fmt != "2":
+        raise CalibrationFileError(f"extrinsic format {fmt!r} is unknown; use 'classic' or '2'")
+    if intrinsics is None:
+        raise CalibrationFileError("the version-2 extrinsic format needs the intrinsic calibration; pass intrinsics=")
+    import datetime
+
+    calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
+    check_robot_name(robot)
+    path = extrinsic_path(out_dir, robot)
+    F = extrinsic_to_v2(H, calib)
+    stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
+    text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})
+    try:
+        return _atomic_write(path, text)
+    except OSError as e:
+        raise CalibrationFileError(f"{path}: could not be written ({e}); the previous file is unchanged. "
+                                   "Check that the folder exists and is writable") from e

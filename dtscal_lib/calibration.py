@@ -4,9 +4,10 @@ Pipeline, for ``V`` views of a planar target (any planar point set, any unit):
 
 1. **Check the input** at the boundary: shapes, NaN, at least 3 views, at least 4
    non-collinear points per view, planar object points, matching lengths.
-2. **Homographies**: one normalized DLT per view, board plane -> pixels.
-3. **Degeneracy check**: every view gives Zhang's two constraints (the seed's
-   equations (12)-(13)) on ``b = (B11, B12, B22, B13, B23, B33)``,
+2. **Homographies**: one normalized DLT per view, board plane -> pixels
+   (:func:`dtscal_lib.homography.estimate_homography`).
+3. **Degeneracy check**: every view gives Zhang's two constraints (activity
+   text, eqs. (12)-(13)) on ``b = (B11, B12, B22, B13, B23, B33)``,
    ``B = K^-T K^-1``. If the stacked constraint matrix ``V`` (plus ``B12 = 0`` when the
    skew is not estimated) does not pin ``b`` down up to scale -- all boards parallel,
    the same pose over and over -- we stop *before* optimising garbage. A strongly
@@ -56,8 +57,10 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .camera import CameraModel, as_K, as_size, project_points
+from .camera import CameraModel, as_K, as_points, project_points
 from .errors import CalibrationError, DtscalError
+from .homography import estimate_homography
+from .validation import check_image_size
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
 
@@ -73,6 +76,10 @@ _PARALLEL_VIEWS_TOL = 2e-3
 MIN_TILT_SPREAD_DEG = 3.0
 #: a focal length whose standard deviation exceeds this fraction of it is not determined
 MAX_RELATIVE_FOCAL_STD = 0.25
+#: the extent of a view's object points, in their unit: a board, not an atom or a planet
+OBJECT_EXTENT_RANGE = (1e-6, 1e6)
+#: image points may lie this fraction of the image size outside it (a detector never does)
+IMAGE_SLACK = 0.25
 
 
 # =========================================================================== result
@@ -113,6 +120,16 @@ class CalibrationResult:
     sigma: float = field(default=float("nan"))
     #: Levenberg-Marquardt iterations used
     iterations: int = 0
+    #: the views the result was fitted to, (N_i, 2) board-plane points and (N_i, 2) pixels, for
+    #: :meth:`quality` (residuals, verdict, projection uncertainty)
+    object_points: list = field(default_factory=list, repr=False)
+    image_points: list = field(default_factory=list, repr=False)
+
+    def quality(self, **kw):
+        """Verdict, systematic-residual checks and projection uncertainty: :func:`dtscal_lib.quality.assess`."""
+        from .quality import assess
+
+        return assess(self, **kw)
 
     def camera(self) -> CameraModel:
         """The calibrated camera, with ``P`` from ``alpha = 0`` as ROS's calibrator sets it."""
@@ -148,7 +165,10 @@ def _check_views(object_points, image_points, image_size):
     img : list of (N_i, 2) float64 pixels
     size : (width, height)
     """
-    w, h = as_size(image_size, name="image_size", error=CalibrationError)
+    try:
+        w, h = check_image_size(image_size, name="image_size")
+    except DtscalError as e:
+        raise CalibrationError(str(e)) from None
     if isinstance(object_points, np.ndarray) and object_points.ndim == 2:
         raise CalibrationError(
             "object_points must be a sequence of views (one (N, 3) array per view), got a single "
@@ -197,6 +217,20 @@ def _check_views(object_points, image_points, image_size):
                     "board coordinates (x, y, 0) or (N, 2) points in the board plane."
                 )
             o = o[:, :2]
+        extent = float(np.ptp(o, axis=0).max())
+        if not OBJECT_EXTENT_RANGE[0] <= extent <= OBJECT_EXTENT_RANGE[1]:
+            raise CalibrationError(
+                f"the object points of view {i} span {extent:.3g} units; a calibration target spans "
+                f"{OBJECT_EXTENT_RANGE[0]:g} to {OBJECT_EXTENT_RANGE[1]:g} of its unit (metres, millimetres, "
+                "squares): give the board's coordinates in one such unit"
+            )
+        outside = ~np.all((p >= -IMAGE_SLACK * np.array([w, h])) & (p <= (1 + IMAGE_SLACK) * np.array([w, h])), axis=1)
+        if outside.any():
+            raise CalibrationError(
+                f"{int(outside.sum())} image point(s) of view {i} lie far outside the {w}x{h} image (e.g. "
+                f"{p[outside][0].tolist()}); image_size must be the (width, height) of the frames the corners "
+                "were found in, and image points are pixels of those frames"
+            )
         if _line_spread(o) < 1e-9:
             raise CalibrationError(
                 f"the object points of view {i} are collinear (or all the same point); a planar "
@@ -214,19 +248,7 @@ def _check_views(object_points, image_points, image_size):
 
 
 def _view_array(a, dims: tuple[int, ...], name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{name} must be a numeric array, got {type(a).__name__}") from None
-    if arr.ndim == 3 and arr.shape[1] == 1:  # OpenCV's (N, 1, d)
-        arr = arr.reshape(arr.shape[0], arr.shape[2])
-    if arr.ndim != 2 or arr.shape[1] not in dims:
-        want = " or ".join(f"(N, {d})" for d in dims)
-        raise CalibrationError(f"{name} must have shape {want} (or (N, 1, {dims[-1]})), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.sum(~np.all(np.isfinite(arr), axis=1)))
-        raise CalibrationError(f"{name} contain NaN or infinite values ({bad} point(s)); remove them first")
-    return arr
+    return as_points(a, dims, name, error=CalibrationError)
 
 
 def _line_spread(p: np.ndarray, absolute: bool = False) -> float:
@@ -243,39 +265,21 @@ def _line_spread(p: np.ndarray, absolute: bool = False) -> float:
 
 
 # =========================================================================== homographies, Zhang
-def _similarity_normalizer(p: np.ndarray) -> np.ndarray:
-    """Hartley normalization (3, 3): centroid to 0, mean distance sqrt(2)."""
-    c = p.mean(axis=0)
-    d = np.sqrt(((p - c) ** 2).sum(axis=1)).mean()
-    s = np.sqrt(2.0) / d
-    return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
-
-
 def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     """Normalized DLT homography from board-plane points to pixels.
 
-    Parameters
-    ----------
-    plane_points : (N, 2) float64 board coordinates (any unit), N >= 4, not collinear
-    pixels : (N, 2) float64 image points
-
-    Returns
-    -------
-    (3, 3) float64 ``H`` with ``[u, v, 1] ~ H [x, y, 1]``, scaled so ``H[2, 2] = 1``
-    when possible (else unit Frobenius norm).
+    The kit's one implementation is :func:`dtscal_lib.homography.estimate_homography`.
     """
-    Ta, Tb = _similarity_normalizer(plane_points), _similarity_normalizer(pixels)
-    a = plane_points @ Ta[:2, :2].T + Ta[:2, 2]
-    b = pixels @ Tb[:2, :2].T + Tb[:2, 2]
-    n = len(a)
-    A = np.zeros((2 * n, 9))
-    A[0::2, 0:2], A[0::2, 2] = a, 1.0
-    A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
-    A[1::2, 3:5], A[1::2, 5] = a, 1.0
-    A[1::2, 6:8], A[1::2, 8] = -b[:, 1:2] * a, -b[:, 1]
-    Hn = np.linalg.svd(A)[2][-1].reshape(3, 3)
-    H = np.linalg.solve(Tb, Hn @ Ta)
-    return H / H[2, 2] if abs(H[2, 2]) > 1e-12 * np.abs(H).max() else H / np.linalg.norm(H)
+    return estimate_homography(plane_points, pixels)
+
+
+def _null_vector(A: np.ndarray) -> np.ndarray:
+    """Unit right singular vector of the smallest singular value of ``A`` (m, n).
+
+    Only the thin SVD is computed when ``m >= n``: the full one would build an
+    (m, m) matrix of left singular vectors, quadratic in the number of views or points.
+    """
+    return np.linalg.svd(A, full_matrices=A.shape[0] < A.shape[1])[2][-1]
 
 
 def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:
@@ -349,7 +353,7 @@ def _intrinsics_from_b(b: np.ndarray) -> np.ndarray | None:
 def zhang_closed_form(homographies, image_size, *, skew: bool = True) -> np.ndarray | None:
     """Zhang's closed-form intrinsics from plane-to-image homographies.
 
-    Solves ``V b = 0`` (equations (12)-(13) of every view, stacked), ``b`` the
+    Solves ``V b = 0`` (activity text, eqs. (12)-(13) of every view, stacked), ``b`` the
     upper triangle of ``B = K^-T K^-1``, in image-normalized coordinates for
     conditioning, then reads ``K`` off ``B``.
 
@@ -366,7 +370,7 @@ def zhang_closed_form(homographies, image_size, *, skew: bool = True) -> np.ndar
     """
     size = (int(image_size[0]), int(image_size[1]))
     V = _constraint_matrix(homographies, size, skew)
-    b = np.linalg.svd(V)[2][-1]
+    b = _null_vector(V)
     Kn = _intrinsics_from_b(b)
     if Kn is None:
         return None
@@ -645,6 +649,8 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
         n_points=int(npts.sum()),
         sigma=float(np.sqrt(sigma2)),
         iterations=iters,
+        object_points=obj,
+        image_points=img,
     )
 
 

@@ -1,6 +1,6 @@
 """Camera model: intrinsic matrix with skew, lens distortion, projection, rectification.
 
-Conventions (the seed's equations (1)-(2)):
+Conventions (activity text, eqs. (1)-(2)):
 
 * A world point ``X`` (N, 3) is moved into the camera frame by ``Xc = R X + t``.
 * Normalized coordinates are ``x = Xc / Zc`` (N, 2): the image of a unit-focal pinhole.
@@ -30,16 +30,31 @@ DIST_MODELS = ("plumb_bob", "radial2")
 
 
 # --------------------------------------------------------------------------- input checks
-def _as_points(a, dim: int, name: str) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
-    if arr.ndim == 1 and arr.size == dim:
-        arr = arr.reshape(1, dim)
+def as_points(a, dim: int | tuple[int, ...], name: str, *, error: type[DtscalError] = DtscalError) -> np.ndarray:
+    """The kit's one point-array validator: ``a`` as finite (N, dim) float64.
+
+    A single point ``(dim,)`` and OpenCV's ``(N, 1, dim)`` are accepted. ``dim`` may be a
+    tuple of allowed widths (e.g. ``(2, 3)``). Raises ``error`` (a :class:`DtscalError`)
+    naming ``name`` and the shape it got.
+
+    >>> as_points([1.0, 2.0], 2, "pixels").shape
+    (1, 2)
+    """
+    dims = (dim,) if isinstance(dim, int) else tuple(dim)
+    try:
+        arr = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise error(f"{name} must be a numeric array, got {type(a).__name__}") from None
+    if arr.ndim == 1 and arr.size in dims:
+        arr = arr.reshape(1, arr.size)
     if arr.ndim == 3 and arr.shape[1] == 1:  # OpenCV's (N, 1, d)
         arr = arr.reshape(-1, arr.shape[2])
-    if arr.ndim != 2 or arr.shape[1] != dim:
-        raise DtscalError(f"{name} must have shape (N, {dim}), got {np.shape(a)}")
+    if arr.ndim != 2 or arr.shape[1] not in dims:
+        want = " or ".join(f"(N, {d})" for d in dims)
+        raise error(f"{name} must have shape {want}, got {np.shape(a)}")
     if not np.all(np.isfinite(arr)):
-        raise DtscalError(f"{name} contains NaN or infinite values")
+        bad = int(np.sum(~np.all(np.isfinite(arr), axis=1)))
+        raise error(f"{name} contain NaN or infinite values ({bad} point(s)); remove them first")
     return arr
 
 
@@ -85,7 +100,7 @@ def intrinsic_matrix(fx: float, fy: float, cx: float, cy: float, skew: float = 0
 # --------------------------------------------------------------------------- pixels <-> normalized
 def normalized_to_pixel(xy, K) -> np.ndarray:
     """``[u, v] = K [x, y, 1]`` for (N, 2) normalized points; returns (N, 2) pixels."""
-    xy = _as_points(xy, 2, "normalized points")
+    xy = as_points(xy, 2, "normalized points")
     K = as_K(K)
     u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
     v = K[1, 1] * xy[:, 1] + K[1, 2]
@@ -94,7 +109,7 @@ def normalized_to_pixel(xy, K) -> np.ndarray:
 
 def pixel_to_normalized(uv, K) -> np.ndarray:
     """Inverse of :func:`normalized_to_pixel` (no distortion involved), (N, 2) -> (N, 2)."""
-    uv = _as_points(uv, 2, "pixels")
+    uv = as_points(uv, 2, "pixels")
     K = as_K(K)
     y = (uv[:, 1] - K[1, 2]) / K[1, 1]
     x = (uv[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
@@ -117,7 +132,7 @@ def distort_normalized(xy, dist) -> np.ndarray:
     -------
     (N, 2) float64 distorted normalized points
     """
-    xy = _as_points(xy, 2, "normalized points")
+    xy = as_points(xy, 2, "normalized points")
     k1, k2, p1, p2, k3 = as_dist(dist)
     x, y = xy[:, 0], xy[:, 1]
     r2 = x * x + y * y
@@ -164,7 +179,7 @@ def undistort_normalized(xy_d, dist, *, tol: float = 1e-14, max_iter: int = 50) 
         If some point does not converge to 1e-9 (the distortion is not invertible there,
         e.g. a polynomial that folds back outside the lens's useful field).
     """
-    xy_d = _as_points(xy_d, 2, "distorted normalized points")
+    xy_d = as_points(xy_d, 2, "distorted normalized points")
     d = as_dist(dist)
     if not np.any(d):
         return xy_d.copy()
@@ -217,7 +232,7 @@ def as_rotation(r) -> np.ndarray:
 
 
 def project_points(X, r, t, K, dist=None) -> np.ndarray:
-    """Project world points into pixels (eqs. (1)-(2) plus lens distortion).
+    """Project world points into pixels (activity text, eqs. (1)-(2), plus lens distortion).
 
     Parameters
     ----------
@@ -237,7 +252,7 @@ def project_points(X, r, t, K, dist=None) -> np.ndarray:
     >>> project_points([[0, 0, 1.0]], np.zeros(3), np.zeros(3), K)
     array([[320., 240.]])
     """
-    X = _as_points(X, 3, "world points")
+    X = as_points(X, 3, "world points")
     R = as_rotation(r)
     t = np.asarray(t, dtype=np.float64)
     if t.size != 3 or not np.all(np.isfinite(t)):

@@ -2,13 +2,16 @@
 
 Sub-commands::
 
-    dtscal course                  open the course in JupyterLab (notebooks/ on the bundled session)
+    dtscal course                  open the course in JupyterLab (the student's workspace/; --instructor: solutions/)
     dtscal synth --out data        regenerate the synthetic recorded Duckiebot session
     dtscal calibrate-intrinsics    frames -> camera_intrinsic/<ROBOT>.yaml
     dtscal calibrate-extrinsics    one frame on the board -> camera_extrinsic/<ROBOT>.yaml
-    dtscal release OUT | --check   write the student version of the course / check notebooks/
+    dtscal handout OUT             write the student hand-out (alias: dtscal release OUT)
+    dtscal release --check|--execute  check notebooks/ against solutions/ / re-run solutions, regenerate
 
-Exit codes: 0 success, 1 a check failed, 2 bad input (the message says what to do).
+Exit codes: 0 success, 1 a check failed, 2 bad input (the message says what to do), 3 a calibration
+was computed but refused as implausible (nothing written over the robot's file; with --keep-anyway it
+is kept as NAME.rejected.yaml beside it), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -19,13 +22,37 @@ import os
 import sys
 from pathlib import Path
 
-from .errors import DtscalError
+from .errors import DtscalError, ImplausibleCalibrationError
+
+#: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
+EXIT_REFUSED = 3
+#: library keyword spellings in messages -> the flags of this command
+_FLAG_WORDING = {"topic=": "--topic", "keep_anyway=True": "--keep-anyway"}
 
 
 def _board(args):
-    from .boards import parse_board
+    from .validation import board_from_flags
 
-    return parse_board(args.board, args.square)
+    return board_from_flags(args.board, args.square)
+
+
+def _cli_wording(message: str) -> str:
+    """The library names its keyword arguments (``topic=``); on the command line they are flags."""
+    for word, flag in _FLAG_WORDING.items():
+        message = message.replace(word, flag)
+    return message
+
+
+def _report_doubts(run) -> int:
+    """Exit code of a finished run: 0, or EXIT_REFUSED when the result was kept against the kit's doubts."""
+    if not run.doubts:
+        return 0
+    print("dtscal: warning: the kit does not believe this calibration:", file=sys.stderr)
+    for d in run.doubts:
+        print(f"  - {d}", file=sys.stderr)
+    where = f"kept as {run.path}" if run.path else "nothing written (--no-write)"
+    print(f"dtscal: --keep-anyway: {where}; the robot's own file is unchanged", file=sys.stderr)
+    return EXIT_REFUSED
 
 
 def _progress(enabled: bool, desc: str):
@@ -49,21 +76,33 @@ def _print_json(obj) -> None:
     sys.stdout.write("\n")
 
 
+def _master(args) -> None:
+    if args.master_uri:  # the live source and the commit both talk to this master
+        os.environ["ROS_MASTER_URI"] = args.master_uri
+
+
 def cmd_calibrate_intrinsics(args) -> int:
     from .pipeline import calibrate_intrinsics
 
     from .pipeline import parse_image_size
 
+    _master(args)
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
-                               progress=_progress(not args.quiet, "frames"),
-                               image_size=parse_image_size(args.image_size))
+                               progress=_progress(not args.quiet, "frames"), keep_anyway=args.keep_anyway,
+                               max_seconds=args.max_seconds, image_size=parse_image_size(args.image_size))
+    from .report import quality_for_run  # verdict; warnings on stderr; figures + index.html with --report
+
+    quality = quality_for_run(run, args.report)
+    committed, failed = _commit(args, run, "intrinsics")
     if args.json:
-        _print_json(run.to_dict())
+        _print_json({**run.to_dict(), "quality": quality.to_dict(),
+                     "report": str(quality.report_path) if quality.report_path else None,
+                     "commit": committed, "commit_error": failed and str(failed)})
     else:
         r = run.result
         print(f"calibrated {run.robot}: {run.samples} samples from {run.tally.total} frames "
-              f"({run.source}); rms {r.rms:.3f} px")
+              f"({run.source}); rms {r.rms:.3f} px; verdict {quality.verdict}")
         names = ["fx", "fy", "cx", "cy"] + (["skew"] if r.skew else [])
         vals = [r.K[0, 0], r.K[1, 1], r.K[0, 2], r.K[1, 2]] + ([r.K[0, 1]] if r.skew else [])
         for n, v in zip(names, vals):
@@ -73,17 +112,60 @@ def cmd_calibrate_intrinsics(args) -> int:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
             print(f"wrote {run.path}")
-    return 0
+        if quality.report_path:
+            print(f"wrote {quality.report_path}")
+        if committed:
+            print(f"committed to {run.robot}: {committed}")
+    if failed:  # after the result is printed: nothing computed is lost
+        raise failed
+    return _report_doubts(run)
+
+
+def _commit(args, run, kind: str):
+    """--commit: send the written file (or a temporary one with --no-write) to the robot; (reply, CommitError)."""
+    from .robot import CommitError
+
+    if not args.commit or run.doubts:  # a result the kit refused is never sent to the robot
+        return None, None
+    try:
+        return _send(args, run, kind), None
+    except CommitError as exc:
+        return None, exc
+
+
+def _send(args, run, kind: str) -> str:
+    import tempfile
+
+    from . import calib_files, robot
+
+    path = run.path
+    if path is None:  # --no-write: the robot still needs a file to read from
+        tmp = tempfile.mkdtemp(prefix="dtscal-commit-")
+        path = (calib_files.save_intrinsics(calib_files.IntrinsicCalibration.from_camera(
+                    run.result.camera(), camera_name=f"/{run.robot}/camera_node"), tmp, run.robot)
+                if kind == "intrinsics" else calib_files.save_extrinsics_as(
+                    run.H, tmp, run.robot, fmt=args.format, intrinsics=args.intrinsics))
+    if kind == "intrinsics":
+        return robot.commit_intrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout)
+    return robot.commit_extrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout,
+                                   url=args.upload_url)
 
 
 def cmd_calibrate_extrinsics(args) -> int:
+    from . import calib_files
     from .pipeline import calibrate_extrinsics
 
+    _master(args)
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
-                               out_dir=None if args.no_write else args.out, topic=args.topic,
-                               progress=_progress(not args.quiet, "frames"))
+                               out_dir=None if args.no_write or args.format != "classic" else args.out,
+                               topic=args.topic, progress=_progress(not args.quiet, "frames"),
+                               keep_anyway=args.keep_anyway, max_seconds=args.max_seconds)
+    if args.format != "classic" and not args.no_write and not run.doubts:
+        run.path = calib_files.save_extrinsics_as(run.H, args.out, run.robot, fmt=args.format,
+                                                  intrinsics=args.intrinsics)
+    committed, failed = _commit(args, run, "extrinsics")
     if args.json:
-        _print_json(run.to_dict())
+        _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
     else:
         print(f"ground homography for {run.robot} from frame {run.frame_index} ({run.source}):")
         for row in run.H:
@@ -91,15 +173,29 @@ def cmd_calibrate_extrinsics(args) -> int:
         x, y = run.image_center_ground
         print(f"  image centre -> ground ({x:.3f}, {y:.3f}) m; corner residuals max "
               f"{run.residual_mm.max():.2f} mm")
+        if run.camera_pose:
+            print(f"  camera {run.camera_pose['height_m']:.3f} m above the ground, looking "
+                  f"{run.camera_pose['pitch_down_deg']:.1f} degrees down")
         if run.path:
             print(f"wrote {run.path}")
-    return 0
+        if committed:
+            print(f"committed to {run.robot}: {committed}")
+    if failed:  # after the result is printed: nothing computed is lost
+        raise failed
+    return _report_doubts(run)
 
 
 def cmd_synth(args) -> int:
     from .synth import generate
+    from .validation import check_output_folder, check_seed
 
-    paths = generate(Path(args.out), seed=args.seed, progress=not args.quiet)
+    seed = check_seed(args.seed)
+    out = check_output_folder(args.out)
+    try:
+        paths = generate(out, seed=seed, progress=not args.quiet)
+    except OSError as e:
+        raise DtscalError(f"--out {args.out}: writing the session failed ({e}); free space or choose another "
+                          "folder") from None
     for p in (paths.values() if isinstance(paths, dict) else paths):
         print(p)
     return 0
@@ -134,21 +230,18 @@ def cmd_release(args) -> int:
 
 
 def cmd_course(args) -> int:
+    from .course import workspace
     from .datasets import session_dir
     from .paths import repo_root
 
     root = repo_root()
+    if args.update:
+        report = workspace.update_workspace(root)
+        print(report.text())
+        return 0 if report.ok else 1
     session_dir()  # fails early, with the fix, if the recording is missing
-    cmd = [sys.executable, "-m", "jupyterlab", f"--ServerApp.root_dir={root}", f"--port={args.port}"]
-    if args.no_browser:
-        cmd.append("--no-browser")
-    if args.ip:
-        cmd.append(f"--ip={args.ip}")
-    if hasattr(os, "geteuid") and os.geteuid() == 0:
-        cmd.append("--allow-root")  # containers and course VMs often run as root
-    notebook = root / "notebooks" / "01_pinhole_projection.ipynb"
-    if notebook.exists():
-        cmd.append(str(notebook))
+    cmd = workspace.jupyter_command(root, instructor=args.instructor, port=args.port, ip=args.ip,
+                                    no_browser=args.no_browser)
     print("starting JupyterLab:", " ".join(cmd), file=sys.stderr)
     os.execv(sys.executable, cmd)
     return 0  # pragma: no cover
@@ -163,14 +256,25 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--square", type=float, default=0.031, help="square size in metres (default 0.031)")
 
     def common(sp):
-        sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images")
+        sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images; live: "
+                        "ros:ROBOT (its camera topic via ROS_MASTER_URI), device:N (webcam), a stream URL")
         sp.add_argument("--topic", help="image topic in a bag (default: the one ending in /image/compressed)")
         sp.add_argument("--robot", help="robot name (default: from the bag topic /ROBOT/camera_node/...)")
-        sp.add_argument("--out", default="calibrations", help="calibrations folder to write into (default ./calibrations)")
+        sp.add_argument("--out", default="calibrations",
+                        help="calibrations folder to write into (default ./calibrations)")
         sp.add_argument("--no-write", action="store_true", help="compute only, write no file")
         sp.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
         sp.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+        sp.add_argument("--keep-anyway", action="store_true",
+                        help="keep a result the kit finds implausible as NAME.rejected.yaml beside the robot's file "
+                             "(exit code 3 still says it was refused)")
         board_args(sp)
+        live = sp.add_argument_group("live camera and robot")
+        live.add_argument("--max-seconds", type=float, default=300.0,
+                          help="live sources: stop collecting after this long (default 300)")
+        live.add_argument("--commit", action="store_true", help="also send the result to the robot (see README)")
+        live.add_argument("--master-uri", help="the robot's ROS master (default $ROS_MASTER_URI)")
+        live.add_argument("--commit-timeout", type=float, default=10.0, help="seconds to wait for the robot")
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
     common(sp)
@@ -178,11 +282,16 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--skew", action="store_true", help="also estimate the skew of K (own refinement)")
     sp.add_argument("--image-size", metavar="WxH",
                     help="size of the frames to calibrate (default: the size in which the board is found most)")
+    sp.add_argument("--report", metavar="DIR", help="write figures and DIR/index.html on how good the calibration is")
     sp.set_defaults(func=cmd_calibrate_intrinsics)
 
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")
     common(sp)
     sp.add_argument("--intrinsics", required=True, help="Duckietown intrinsic YAML (camera_intrinsic/NAME.yaml)")
+    sp.add_argument("--format", choices=["classic", "2"], default="classic",
+                    help="extrinsic file: classic flat homography (default) or Duckietown's newer version 2")
+    sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "
+                    "http://ROBOT.local/files/data/config/calibrations/camera_extrinsic/ROBOT.yaml)")
     sp.set_defaults(func=cmd_calibrate_extrinsics)
 
     sp = sub.add_parser("synth", help="regenerate the synthetic recorded Duckiebot session")
@@ -191,7 +300,24 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-q", "--quiet", action="store_true")
     sp.set_defaults(func=cmd_synth)
 
-    sp = sub.add_parser("release", help="student version of the course; --check compares notebooks/ with solutions/")
+    for name in ("handout", "release"):
+        sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ "
+                                       "with solutions/")
+        release_args(sp)
+
+    sp = sub.add_parser("course",
+                        help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
+    sp.add_argument("--port", type=int, default=8888)
+    sp.add_argument("--ip", default=None)
+    sp.add_argument("--no-browser", action="store_true")
+    sp.add_argument("--instructor", action="store_true", help="open solutions/ (the instructor's kit) instead")
+    sp.add_argument("--update", action="store_true",
+                    help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
+    sp.set_defaults(func=cmd_course)
+    return p
+
+
+def release_args(sp) -> None:
     sp.add_argument("out", nargs="?", help="folder to write the student release into")
     sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
     sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/")
@@ -200,20 +326,16 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")
     sp.set_defaults(func=cmd_release)
 
-    sp = sub.add_parser("course", help="open the course in JupyterLab")
-    sp.add_argument("--port", type=int, default=8888)
-    sp.add_argument("--ip", default=None)
-    sp.add_argument("--no-browser", action="store_true")
-    sp.set_defaults(func=cmd_course)
-    return p
-
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except ImplausibleCalibrationError as exc:
+        print(f"dtscal: error: {_cli_wording(str(exc))}", file=sys.stderr)
+        return EXIT_REFUSED
     except DtscalError as exc:
-        print(f"dtscal: error: {exc}", file=sys.stderr)
+        print(f"dtscal: error: {_cli_wording(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("dtscal: interrupted", file=sys.stderr)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .boards import DUCKIETOWN_BOARD, Board
-from .camera import as_size
+from .camera import as_points, as_size
 from .duckietown import IMAGE_SIZE, MAX_SAMPLES_FOR_CALIBRATE, PARAM_RANGES, SAMPLE_MIN_DISTANCE
 from .errors import DtscalError
 
@@ -35,16 +35,12 @@ PARAM_NAMES = ("X", "Y", "Size", "Skew")
 
 # --------------------------------------------------------------------------- pure functions
 def _as_corners(corners, board: Board) -> np.ndarray:
-    c = np.asarray(corners, dtype=np.float64)
-    if c.ndim == 3 and c.shape[1] == 1:  # OpenCV's (N, 1, 2)
-        c = c.reshape(-1, 2)
-    if c.ndim != 2 or c.shape[1] != 2 or len(c) != board.n_corners:
+    c = as_points(corners, 2, "corners")
+    if len(c) != board.n_corners:
         raise DtscalError(
             f"expected ({board.n_corners}, 2) corners for a {board.describe()} board, got shape {np.shape(corners)}; "
             "pass the corners of one detection in the board's row-major order"
         )
-    if not np.all(np.isfinite(c)):
-        raise DtscalError("corners contain NaN or infinite values; drop this detection")
     return c
 
 

@@ -56,7 +56,8 @@ def data_dir() -> Path:
         if not _has_session(folder):
             raise DtscalError(
                 f"{ENV_VAR}={env} but {folder / 'session' / TRUTH_FILE} does not exist; point {ENV_VAR} "
-                f"at a folder holding session/, unset it, or {_REGENERATE.replace('--out data', '--out ' + str(folder))}"
+                f"at a folder holding session/, unset it, or "
+                f"{_REGENERATE.replace('--out data', '--out ' + str(folder))}"
             )
         return folder
     candidates = [Path(__file__).resolve().parent.parent / "data", Path.cwd() / "data"]

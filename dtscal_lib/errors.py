@@ -117,3 +117,14 @@ def opencv_message(err: BaseException, limit: int = 200) -> str:
     m = re.search(r"error: (\(.*)", text)
     text = m.group(1) if m else text
     return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+class ImplausibleCalibrationError(CalibrationError):
+    """A calibration was computed but the kit does not believe it; nothing was written over the robot's file.
+
+    ``doubts`` lists the reasons (each says what to do). ``dtscal`` exits with code 3.
+    """
+
+    def __init__(self, message: str, doubts: list[str]):
+        super().__init__(message)
+        self.doubts = list(doubts)

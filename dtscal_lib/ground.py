@@ -2,7 +2,8 @@
 
 The ground plane is the robot frame's ``z = 0`` plane: origin below the midpoint of the
 drive wheels, **x forward, y left**, in metres. A plane seen by a pinhole camera is
-related to the (rectified, i.e. undistorted) image by a homography, the seed's eq. (13):
+related to the (rectified, i.e. undistorted) image by a homography (activity text, eqs. (4)-(6),
+read from the image to the plane):
 
     s [x, y, 1]^T = H [u, v, 1]^T
 
@@ -10,9 +11,10 @@ related to the (rectified, i.e. undistorted) image by a homography, the seed's e
 ``camera_extrinsic/<ROBOT>.yaml`` stores it. A raw (distorted) camera pixel is first
 rectified (``undistortPoints`` with ``R`` and ``P``), then mapped with ``H``.
 
-The extrinsic procedure (:func:`calibrate_extrinsics`) follows ``dts duckiebot
-calibrate_extrinsics``: one frame of the 7x5-corner, 31 mm board lying flat in front of
-the robot (near row of inner corners at x = 0.191 m, centred), resized to width 640,
+The extrinsic procedure on one image (:func:`extrinsics_from_image`; the headless
+:func:`dtscal_lib.pipeline.calibrate_extrinsics` finds that image in a recording) follows
+``dts duckiebot calibrate_extrinsics``: one frame of the 7x5-corner, 31 mm board lying flat
+in front of the robot (near row of inner corners at x = 0.191 m, centred), resized to width 640,
 rectified with the intrinsic calibration, corners detected and ordered from the
 near-right corner, ``cv2.findHomography(..., RANSAC)``, and Duckietown's ``H[1][2] > 0``
 corruption check.
@@ -33,9 +35,10 @@ import numpy as np
 
 from . import duckietown as dt
 from .boards import DUCKIETOWN_BOARD, GROUND_NEAR_ROW_X, Board, ground_points, order_for_ground
-from .camera import CameraModel, rectify_image
+from .camera import CameraModel, as_points, rectify_image
 from .errors import CalibrationError, DtscalError, Reason
 from .detect import detect_board_still
+from .homography import apply_homography, as_homography, invert_homography
 
 #: default RANSAC inlier threshold, metres on the ground (Duckietown passes OpenCV's
 #: default of 3, which in metres rejects nothing; 1 cm rejects a mis-detected corner)
@@ -44,26 +47,11 @@ RANSAC_THRESHOLD_M = 0.01
 
 # --------------------------------------------------------------------------- checks
 def _points(a, name: str) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
-    if arr.ndim == 1 and arr.size == 2:
-        arr = arr.reshape(1, 2)
-    if arr.ndim == 3 and arr.shape[1] == 1:
-        arr = arr.reshape(-1, arr.shape[2])
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise DtscalError(f"{name} must have shape (N, 2), got {np.shape(a)}")
-    if not np.all(np.isfinite(arr)):
-        raise CalibrationError(f"{name} contains NaN or infinite values", reason=Reason.BAD_VALUES)
-    return arr
+    return as_points(a, 2, name)
 
 
 def _homography(H, name: str = "H") -> np.ndarray:
-    H = np.asarray(H, dtype=np.float64)
-    if H.size != 9:
-        raise DtscalError(f"{name} must be a 3x3 homography (or 9 row-major values), got shape {H.shape}")
-    H = H.reshape(3, 3)
-    if not np.all(np.isfinite(H)):
-        raise CalibrationError(f"{name} contains NaN or infinite values", reason=Reason.BAD_VALUES)
-    return H
+    return as_homography(H, name)
 
 
 # --------------------------------------------------------------------------- estimation
@@ -123,44 +111,6 @@ def estimate_ground_homography(pixels, ground, *, method: str | int = "ransac",
 
 
 # --------------------------------------------------------------------------- mapping
-def _apply(H: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Homogeneous products: returns (N, 3) ``H [p, 1]`` and the (N,) relative size of w."""
-    hom = pts @ H[:, :2].T + H[:, 2]
-    scale = np.abs(pts[:, 0] * H[2, 0]) + np.abs(pts[:, 1] * H[2, 1]) + abs(H[2, 2])
-    return hom, scale
-
-
-def apply_homography(H, pts) -> np.ndarray:
-    """Map points with a homography: ``[x, y, w]^T = H [u, v, 1]^T``, then ``(x / w, y / w)``.
-
-    Parameters
-    ----------
-    H : (3, 3) homography
-    pts : (N, 2) points (or a single (2,) point)
-
-    Returns
-    -------
-    (N, 2) float64 mapped points
-
-    Raises
-    ------
-    DtscalError
-        If a point maps to infinity (``w = 0``: for a ground homography, a pixel on
-        the horizon line).
-    """
-    H = _homography(H)
-    pts = _points(pts, "points")
-    hom, scale = _apply(H, pts)
-    w = hom[:, 2]
-    bad = np.abs(w) <= 1e-12 * scale
-    if np.any(bad):
-        raise DtscalError(
-            f"{int(bad.sum())} point(s) map to infinity under the homography (e.g. {pts[bad][0].tolist()}); "
-            "for a ground homography these pixels lie on the horizon, not on the ground"
-        )
-    return hom[:, :2] / w[:, None]
-
-
 def pixel_to_ground(H, uv_rectified) -> np.ndarray:
     """Rectified pixels (N, 2) -> ground points (N, 2), metres (x forward, y left)."""
     return apply_homography(H, uv_rectified)
@@ -168,11 +118,10 @@ def pixel_to_ground(H, uv_rectified) -> np.ndarray:
 
 def ground_to_pixel(H, xy) -> np.ndarray:
     """Ground points (N, 2), metres -> rectified pixels (N, 2), with ``H^-1``."""
-    H = _homography(H)
     try:
-        Hinv = np.linalg.inv(H)
-    except np.linalg.LinAlgError:
-        raise DtscalError("H is singular and cannot be inverted; recalibrate the extrinsics") from None
+        Hinv = invert_homography(H)
+    except DtscalError as exc:
+        raise DtscalError(f"{exc} (recalibrate the extrinsics)") from None
     return apply_homography(Hinv, xy)
 
 
@@ -190,7 +139,7 @@ def distorted_pixel_to_ground(camera: CameraModel, H, uv) -> np.ndarray:
 # --------------------------------------------------------------------------- the procedure
 @dataclass
 class ExtrinsicResult:
-    """Outcome of :func:`calibrate_extrinsics`.
+    """Outcome of :func:`extrinsics_from_image`.
 
     Attributes
     ----------
@@ -256,7 +205,7 @@ def _find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, s
     return det.corners, "found" if det.found else det.reason
 
 
-def calibrate_extrinsics(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
+def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
                          method: str = "ransac") -> ExtrinsicResult:
     """Duckietown's extrinsic calibration from one frame of the board lying in front of the robot.
 
@@ -329,6 +278,81 @@ def calibrate_extrinsics(image: np.ndarray, camera: CameraModel, board: Board = 
         raise CalibrationError("the image centre lies on the horizon of the fitted homography; "
                                "the camera must look down at the ground", reason=Reason.HORIZON) from None
     return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground)
+
+
+# --------------------------------------------------------------------------- plausibility
+#: what a ground homography must say about the camera that looks at the ground in front of a robot
+GROUND_CAMERA_LIMITS = {"height_m": (0.03, 0.5), "pitch_down_deg": (2.0, 75.0), "abs_yaw_deg": 30.0,
+                        "axis_ratio": 1.15, "axis_angle_error_deg": 8.0}
+
+
+def camera_pose_from_homography(H, K) -> dict:
+    """The camera's pose over the ground, recovered from a ground homography and ``K``.
+
+    ``H`` maps rectified pixels to ground metres, so ``K^-1 H^-1 ~ [r1 r2 t]`` (the seed's
+    eq. (13) read backwards): ``r1``, ``r2`` are the ground's x and y axes in the camera
+    frame and ``t`` the robot origin. ``K`` (3, 3) is the rectified camera matrix (``P[:, :3]``).
+
+    Returns
+    -------
+    dict with ``height_m`` (camera centre above the ground), ``position_m`` (x, y of the
+    camera centre on the ground), ``pitch_down_deg`` (optical axis below the horizon),
+    ``yaw_deg`` (optical axis left of the robot's x axis), ``axis_ratio`` (|r1| / |r2|, 1
+    for a true plane view) and ``axis_angle_deg`` (angle between r1 and r2, 90 for one).
+    """
+    M = np.linalg.solve(np.asarray(K, dtype=np.float64)[:3, :3], np.linalg.inv(_homography(H)))
+    lam = 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
+    if (GROUND_NEAR_ROW_X * r1 + t)[2] < 0:  # the board must be in front of the camera
+        r1, r2, t = -r1, -r2, -t
+    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    R = U @ Wt
+    centre, axis = -R.T @ t, R[2]  # camera centre and optical axis in the robot frame (z up)
+    cosang = float(r1 @ r2 / (np.linalg.norm(r1) * np.linalg.norm(r2)))
+    return {"height_m": float(centre[2]), "position_m": [float(centre[0]), float(centre[1])],
+            "pitch_down_deg": float(np.degrees(np.arcsin(np.clip(-axis[2], -1, 1)))),
+            "yaw_deg": float(np.degrees(np.arctan2(axis[1], axis[0]))),
+            "axis_ratio": float(np.linalg.norm(r1) / np.linalg.norm(r2)),
+            "axis_angle_deg": float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))}
+
+
+def ground_homography_doubts(H, K) -> list[str]:
+    """Reasons to disbelieve that ``H`` shows a robot's camera looking down at the ground ahead.
+
+    Checks Duckietown's ``H[1][2] <= 0`` rule and the pose of :func:`camera_pose_from_homography`
+    against :data:`GROUND_CAMERA_LIMITS`. An empty list means plausible.
+
+    >>> from dtscal_lib import duckietown as dt
+    >>> from dtscal_lib.camera import CameraModel
+    >>> cam = CameraModel(dt.default_K(), dt.default_dist(), dt.IMAGE_SIZE)
+    >>> ground_homography_doubts(np.reshape(dt.DEFAULT_HOMOGRAPHY, (3, 3)), cam.P[:, :3])
+    []
+    """
+    H = _homography(H)
+    lim = GROUND_CAMERA_LIMITS
+    out = []
+    if dt.homography_is_corrupt(H):
+        out.append(f"H[1][2] = {H[1, 2]:.3g} > 0, which Duckietown rejects as corrupt (mirrored or mis-ordered board)")
+    pose = camera_pose_from_homography(H, K)
+    lo, hi = lim["height_m"]
+    if not lo <= pose["height_m"] <= hi:
+        out.append(f"the camera would be {pose['height_m']:.3f} m above the ground (a robot's camera: {lo}-{hi} m)")
+    lo, hi = lim["pitch_down_deg"]
+    if not lo <= pose["pitch_down_deg"] <= hi:
+        out.append(f"the camera would look {pose['pitch_down_deg']:.1f} degrees below the horizon "
+                   f"(looking down at the ground ahead: {lo:g}-{hi:g})")
+    if abs(pose["yaw_deg"]) > lim["abs_yaw_deg"]:
+        out.append(f"the camera would look {pose['yaw_deg']:.0f} degrees to the side of the robot's forward "
+                   f"axis (at most {lim['abs_yaw_deg']:g})")
+    if pose["position_m"][0] >= GROUND_NEAR_ROW_X:
+        out.append(f"the camera would stand {pose['position_m'][0]:.3f} m ahead of the axle, on or beyond the "
+                   f"board (its near row is at {GROUND_NEAR_ROW_X} m)")
+    ratio = max(pose["axis_ratio"], 1 / pose["axis_ratio"])
+    if ratio > lim["axis_ratio"] or abs(pose["axis_angle_deg"] - 90) > lim["axis_angle_error_deg"]:
+        out.append(f"the homography is not a view of a flat ground through this camera (ground axes scaled "
+                   f"{ratio:.2f}:1 and {pose['axis_angle_deg']:.0f} degrees apart; expected 1:1 and 90): "
+                   "wrong intrinsics, or the board was not lying flat")
+    return out
 
 
 # --------------------------------------------------------------------------- views
@@ -405,7 +429,8 @@ def draw_ground_grid(rectified_image: np.ndarray, H, *, spacing: float = 0.05, x
     ref = np.sign(H[2] @ np.array([(w - 1) / 2.0, h - 1.0, 1.0]))
 
     def polyline(pts_ground: np.ndarray) -> None:
-        hom, scale = _apply(Hinv, pts_ground)
+        hom = pts_ground @ Hinv[:, :2].T + Hinv[:, 2]
+        scale = np.abs(pts_ground) @ np.abs(Hinv[2, :2]) + abs(Hinv[2, 2])
         # H^-1 g = p / w' with w' = H[2] . p: in front when its sign matches ref's
         front = np.sign(hom[:, 2]) == ref
         front &= np.abs(hom[:, 2]) > 1e-9 * scale

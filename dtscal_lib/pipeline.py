@@ -1,7 +1,7 @@
 """The headless calibration pipeline: frames in, Duckietown calibration files out.
 
 These are the functions behind ``dtscal calibrate-intrinsics`` and
-``dtscal calibrate-extrinsics``; the live notebook wraps the same steps frame by frame.
+``dtscal calibrate-extrinsics``; the Duckiebot camera notebook (06) runs the same steps frame by frame.
 Nothing here raises on a bad frame: every unusable frame is counted under a reason
 and skipped. Errors are raised only when the run as a whole cannot produce a
 calibration, and then the message says what to do.
@@ -24,9 +24,11 @@ from .calibration import CalibrationResult, calibrate
 from .camera import as_size
 from .coverage import CoverageTracker
 from .detect import detect_board
-from .errors import CalibrationError, DtscalError, Reason, opencv_message
+from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError, Reason, opencv_message
+from .plausibility import intrinsic_doubts
 from .sources import Frame, open_source
 from .sources.headers import MAX_PIXELS, MAX_SIDE
+from .validation import check_board, check_image_size, check_output_folder
 
 #: fewer samples than this cannot give a trustworthy calibration
 MIN_SAMPLES = 3
@@ -145,6 +147,10 @@ class SizeGroups:
         self.image_size = None if image_size is None else as_size(image_size, name="image_size")
         self.groups: dict[tuple[int, int], _SizeGroup] = {}
 
+    def ready(self) -> bool:
+        """True once some size's coverage enables CALIBRATE (a live camera stops collecting then)."""
+        return any(g.tracker.ready() for g in self.groups.values())
+
     def group(self, img: np.ndarray) -> _SizeGroup:
         size = (int(img.shape[1]), int(img.shape[0]))
         if size not in self.groups:
@@ -191,6 +197,23 @@ def _robot_name(robot: str | None, source) -> str:
     )
 
 
+def _refuse_or_keep(doubts: list[str], kind: str, robot: str, out_dir, keep_anyway: bool, write) -> Path | None:
+    """Refuse a calibration the kit does not believe, or (``keep_anyway``) write it as ``ROBOT.rejected.yaml``.
+
+    ``write(rejected: bool) -> Path`` writes the file. Returns the path of the kept file
+    (or ``None`` when nothing is written); raises :class:`ImplausibleCalibrationError` otherwise.
+    """
+    if keep_anyway:
+        return write(True) if out_dir is not None else None
+    listed = "".join(f"\n  - {d}" for d in doubts)
+    where = f"camera_{kind}/{robot}.yaml"
+    raise ImplausibleCalibrationError(
+        f"refusing to write {where}: the kit does not believe this {kind} calibration:{listed}\n"
+        f"Nothing was written; the previous {where} (if any) is unchanged. Record again as described, or, as an "
+        f"expert, rerun with keep_anyway=True to keep the result as camera_{kind}/{robot}"
+        f"{calib_files.REJECTED_SUFFIX}.yaml beside it", doubts)
+
+
 @dataclass
 class IntrinsicRun:
     result: CalibrationResult
@@ -200,6 +223,8 @@ class IntrinsicRun:
     bars: list
     source: str
     path: Path | None = None
+    #: why the kit does not believe the result (kept with keep_anyway); empty when plausible
+    doubts: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = self.result.to_dict()
@@ -210,13 +235,24 @@ class IntrinsicRun:
             frames=self.tally.to_dict(),
             coverage={b.name: round(float(b.progress), 4) for b in self.bars},
             output=str(self.path) if self.path else None,
+            doubts=list(self.doubts),
         )
         return out
+
+
+def _open_frames(source_spec, topic, max_seconds=None, done=None):
+    """A recording (:func:`open_source`), or a live camera (``ros:``, ``device:``, URL) read until ``done()``."""
+    from .sources.live import LiveFrames, is_live_spec
+
+    if is_live_spec(source_spec):
+        return LiveFrames(source_spec, topic=topic, max_seconds=max_seconds, done=done)
+    return open_source(source_spec, topic=topic)
 
 
 def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model: str = "plumb_bob",
                          skew: bool = False, robot: str | None = None, out_dir=None, topic: str | None = None,
                          progress: Callable[[Iterable], Iterable] | None = None,
+                         keep_anyway: bool = False, max_seconds: float | None = None,
                          image_size: tuple[int, int] | None = None) -> IntrinsicRun:
     """Detect the board in every frame of a source, select samples, calibrate, write the YAML.
 
@@ -230,14 +266,23 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     out_dir : the ``calibrations`` folder; ``out_dir/camera_intrinsic/<robot>.yaml`` is written.
         ``None`` writes nothing.
     progress : optional wrapper around the frame iterator (e.g. tqdm)
+    max_seconds : live cameras only: stop collecting after this long (they stop anyway once
+        the coverage rule enables CALIBRATE)
+    keep_anyway : when the result fails :func:`~dtscal_lib.plausibility.intrinsic_doubts`, write it as
+        ``<robot>.rejected.yaml`` and return it with ``run.doubts`` instead of raising
+        :class:`~dtscal_lib.errors.ImplausibleCalibrationError` (``<robot>.yaml`` is never replaced by it)
     image_size : (width, height) of the frames to calibrate; by default the size of the
         frames in which the board is found most often. Frames of other sizes are counted as
         ``size_mismatch`` and skipped.
     """
-    src = open_source(source_spec, topic=topic)
-    robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
-    tally = FrameTally()
+    check_board(board)
     groups = SizeGroups(board, image_size)
+    src = _open_frames(source_spec, topic, max_seconds, groups.ready)
+    robot_name = (_robot_name(robot, src) if out_dir is not None
+                  else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
+    if out_dir is not None:
+        check_output_folder(out_dir)
+    tally = FrameTally()
     frames = progress(src) if progress else src
     for frame, img in usable_images(frames, tally):
         group = groups.group(img)
@@ -266,6 +311,7 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
             group.obj.append(board.object_points())
             group.img.append(det.corners)
             group.tally.used += 1
+    tally.rejected.update(getattr(src, "bad", {}))  # corrupt frames a live source skipped
     resolved = groups.resolve(tally)
     if resolved is None and groups.groups:
         seen = ", ".join(f"{w}x{h}" for w, h in groups.groups)
@@ -292,8 +338,14 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         tally.used -= len(dropped)
         tally.rejected[Reason.OUTLIER_VIEW] += len(dropped)
     run = IntrinsicRun(result, robot_name, tally, len(obj) - len(dropped), tracker.bars(), src.describe())
-    if out_dir is not None:
-        calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
+    calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
+    gone = set(dropped)
+    run.doubts = intrinsic_doubts(result, [p for i, p in enumerate(imgp) if i not in gone])
+    if run.doubts:
+        run.path = _refuse_or_keep(run.doubts, "intrinsic", robot_name, out_dir, keep_anyway,
+                                   lambda rejected: calib_files.save_intrinsics(calib, out_dir, robot_name,
+                                                                                rejected=rejected))
+    elif out_dir is not None:
         run.path = calib_files.save_intrinsics(calib, out_dir, robot_name)
     return run
 
@@ -308,6 +360,10 @@ class ExtrinsicRun:
     image_center_ground: np.ndarray
     source: str
     path: Path | None = None
+    #: the camera's height and pitch recovered from H (:func:`~dtscal_lib.ground.camera_pose_from_homography`)
+    camera_pose: dict = field(default_factory=dict)
+    #: why the kit does not believe the homography (kept with keep_anyway); empty when plausible
+    doubts: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {
@@ -319,24 +375,35 @@ class ExtrinsicRun:
             "corner_residual_mm": {"max": float(np.max(self.residual_mm)), "mean": float(np.mean(self.residual_mm))},
             "frames": self.tally.to_dict(),
             "output": str(self.path) if self.path else None,
+            "camera_pose": dict(self.camera_pose),
+            "doubts": list(self.doubts),
         }
 
 
 def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIETOWN_BOARD,
                          robot: str | None = None, out_dir=None, topic: str | None = None,
-                         progress=None) -> ExtrinsicRun:
+                         progress=None, keep_anyway: bool = False, max_seconds: float | None = None) -> ExtrinsicRun:
     """Duckietown's extrinsic procedure on the first usable frame of a source.
 
     ``intrinsics_file`` is a Duckietown intrinsic YAML; the homography maps pixels of the
     image rectified with that file's ``P`` to ground metres (robot frame: x forward,
-    y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given.
+    y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given, if the
+    homography describes a camera looking down at the ground ahead
+    (:func:`~dtscal_lib.ground.ground_homography_doubts`); ``keep_anyway`` as in :func:`calibrate_intrinsics`.
     """
-    from .ground import calibrate_extrinsics as fit_on_image
+    from .ground import extrinsics_from_image as fit_on_image
+    from .ground import camera_pose_from_homography, ground_homography_doubts
 
+    check_board(board)
     calib = calib_files.load_intrinsics(intrinsics_file)
+    check_image_size(calib.size, name=f"{intrinsics_file}: image_width x image_height",
+                     hint="; give the intrinsic file of the camera that took these frames (--intrinsics)")
     camera = calib.camera()
-    src = open_source(source_spec, topic=topic)
-    robot_name = _robot_name(robot, src) if out_dir is not None else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera")
+    src = _open_frames(source_spec, topic, max_seconds)
+    robot_name = (_robot_name(robot, src) if out_dir is not None
+                  else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
+    if out_dir is not None:
+        check_output_folder(out_dir)
     tally = FrameTally()
     frames = progress(src) if progress else src
     last_error = None
@@ -353,8 +420,14 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
             continue
         tally.used += 1
         run = ExtrinsicRun(robot_name, res.H, frame.index, tally, np.asarray(res.residual_mm),
-                           np.asarray(res.image_center_ground), src.describe())
-        if out_dir is not None:
+                           np.asarray(res.image_center_ground), src.describe(),
+                           camera_pose=camera_pose_from_homography(res.H, camera.P[:, :3]),
+                           doubts=ground_homography_doubts(res.H, camera.P[:, :3]))
+        if run.doubts:
+            run.path = _refuse_or_keep(run.doubts, "extrinsic", robot_name, out_dir, keep_anyway,
+                                       lambda rejected, H=res.H: calib_files.save_extrinsics(H, out_dir, robot_name,
+                                                                                    rejected=rejected))
+        elif out_dir is not None:
             run.path = calib_files.save_extrinsics(res.H, out_dir, robot_name)
         return run
     raise CalibrationError(

@@ -45,6 +45,8 @@ BEGIN = "### BEGIN SOLUTION"
 END = "### END SOLUTION"
 #: first line of the stub that replaces a region (inject_solutions looks for it)
 STUB_COMMENT = "# YOUR CODE HERE: replace the next line with your code"
+#: the student's region in a generated notebook (carried over by ``dtscal course --update``)
+BEGIN_YOURS, END_YOURS = "### BEGIN YOUR CODE", "### END YOUR CODE"
 EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG = "exercise", "imports", "solution_only"
 #: cell metadata the student version keeps; everything else (execution timings, scroll
 #: state, collapsed flags...) is dropped
@@ -55,7 +57,64 @@ EXCLUDED_SUFFIXES = (".pyc", ".pyo")
 RELEASE_MARKER = ".dtscal-release"
 #: what a student release holds besides the notebooks
 RELEASE_TREES = ("dtscal_lib", "data")
-RELEASE_FILES = ("pyproject.toml", "README.md", "LICENSE")
+RELEASE_FILES = ("pyproject.toml", "LICENSE")
+#: the hand-out's own README and one-command start (written by :func:`release`)
+STUDENT_README = """# Camera calibration for Duckietown: the course
+
+Five JupyterLab notebooks in which you write the pieces of camera calibration yourself: pinhole
+projection, the homography, Zhang's intrinsic calibration, lens distortion and rectification, and the
+ground homography of the Duckiebot's extrinsic calibration. A recorded Duckiebot camera session is
+included, so no robot is needed.
+
+## Start
+
+On a machine with Python 3.11 or newer:
+
+```bash
+bash start.sh
+```
+
+The first run makes a Python environment in `.venv/` and installs the course into it (a few minutes);
+then JupyterLab opens at notebook 01. Later runs start in seconds. Options: `bash start.sh --no-browser`
+prints the address to open instead; `--port 8890` picks another port.
+
+## Where you work
+
+You write in `workspace/`, your own copy of the notebooks (JupyterLab shows only this folder).
+`notebooks/` holds the course as handed out; do not edit it. Start at `01_pinhole_projection.ipynb` and
+go in order: each notebook checks your functions as you go, and until a function passes its check the
+notebook uses the kit's stand-in and says so, so every notebook runs to the end.
+
+Write your code between the `### BEGIN YOUR CODE` and `### END YOUR CODE` lines and keep those lines.
+
+## A new version of the course
+
+If your instructor hands out a corrected course, unpack it into a new folder, copy your old
+`workspace/` folder into it, and run `bash start.sh --update`: your code is carried into the new
+notebooks, your old notebooks are kept in `workspace/backups/`, and anything that could not be carried
+over is listed.
+"""
+START_SH = """#!/usr/bin/env bash
+# Start the course: make .venv on the first run, install the course into it, open JupyterLab at notebook 01.
+# Options go to `dtscal course`, e.g. --no-browser, --port 8890, --update.
+set -euo pipefail
+cd "$(dirname "$0")"
+PYTHON="${PYTHON:-python3}"
+if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+  echo "start.sh: needs Python 3.11 or newer; install it, or run: PYTHON=/path/to/python3.11 bash start.sh" >&2
+  exit 2
+fi
+if [ ! -x .venv/bin/python ]; then
+  echo "making the course's Python environment in .venv (first run only)" >&2
+  "$PYTHON" -m venv .venv
+fi
+if ! .venv/bin/python -c 'import dtscal_lib, jupyterlab' 2>/dev/null; then
+  echo "installing the course into .venv (first run only; a few minutes)" >&2
+  .venv/bin/python -m pip install --quiet --upgrade pip
+  .venv/bin/python -m pip install --quiet -e .
+fi
+exec .venv/bin/dtscal course "$@"
+"""
 
 _DEF_RE = re.compile(r"^\s*def\s+([A-Za-z_]\w*)\s*\(")
 
@@ -73,8 +132,9 @@ def _where(nb_name: str, index: int) -> str:
     return f"{nb_name}, cell {index}"
 
 
-def find_regions(source: str, where: str = "cell") -> list[tuple[int, int, str]]:
-    """Solution regions of one cell's source.
+def find_regions(source: str, where: str = "cell", *, begin: str = BEGIN,
+                 end: str = END) -> list[tuple[int, int, str]]:
+    """Solution regions of one cell's source (or other ``begin`` ... ``end`` regions).
 
     Parameters
     ----------
@@ -94,41 +154,44 @@ def find_regions(source: str, where: str = "cell") -> list[tuple[int, int, str]]
     DtscalError
         On a ``BEGIN`` without ``END``, an ``END`` without ``BEGIN``, or nested regions.
     """
-    regions, begin, func = [], None, ""
+    BEGIN, END = begin, end  # noqa: N806 (the messages name the markers in use)
+    regions, opened, func = [], None, ""
     for i, line in enumerate(_lines(source)):
         m = _DEF_RE.match(line)
-        if m and begin is None:
+        if m and opened is None:
             func = m.group(1)
         if _is_marker(line, BEGIN):
-            if begin is not None:
+            if opened is not None:
                 raise DtscalError(
-                    f"{where}: '{BEGIN}' on line {i + 1} before the region opened on line {begin + 1} "
-                    f"was closed; add '{END}' after the solution code"
+                    f"{where}: '{BEGIN}' on line {i + 1} before the region opened on line {opened + 1} "
+                    f"was closed; add '{END}' after the code"
                 )
-            begin = i
+            opened = i
         elif _is_marker(line, END):
-            if begin is None:
+            if opened is None:
                 raise DtscalError(
                     f"{where}: '{END}' on line {i + 1} has no matching '{BEGIN}' above it; "
                     "add the BEGIN marker or delete the stray END"
                 )
-            regions.append((begin, i, func))
-            begin = None
+            regions.append((opened, i, func))
+            opened = None
         elif BEGIN.lstrip("# ") in line or END.lstrip("# ") in line:
             raise DtscalError(
-                f"{where}: line {i + 1} mentions a solution marker but is not exactly "
+                f"{where}: line {i + 1} mentions a marker but is not exactly "
                 f"'{BEGIN}' or '{END}' on a line of its own: {line.strip()!r}"
             )
-    if begin is not None:
+    if opened is not None:
         raise DtscalError(
-            f"{where}: '{BEGIN}' on line {begin + 1} is never closed; add '{END}' after the solution code"
+            f"{where}: '{BEGIN}' on line {opened + 1} is never closed; add '{END}' after the code"
         )
     return regions
 
 
 def _stub(indent: str, func: str) -> list[str]:
+    """The student's stub, between the YOUR CODE markers that workspace updates carry over."""
     what = f"{func} is not written yet" if func else "this exercise is not written yet"
-    return [f"{indent}{STUB_COMMENT}", f'{indent}raise NotImplementedError("{what}")']
+    return [f"{indent}{BEGIN_YOURS}", f"{indent}{STUB_COMMENT}", f'{indent}raise NotImplementedError("{what}")',
+            f"{indent}{END_YOURS}"]
 
 
 def _indent_of(line: str) -> str:
@@ -355,10 +418,12 @@ def _check_out_dir(out: Path, root: Path) -> None:
 def release(out_dir, repo_root=None) -> Path:
     """Write the student version of the course into ``out_dir``.
 
-    It holds ``notebooks/`` (generated from ``solutions/``, never copied), ``dtscal_lib/``
-    and ``data/`` without grading-only folders (:data:`EXCLUDED_DIRS`) and caches, and
-    ``pyproject.toml``, ``README.md`` (and ``LICENSE`` when present). It holds no
-    ``solutions/`` and no ``tests/``. A folder written by an earlier release is replaced.
+    This is the hand-out (``dtscal handout OUT``): a self-contained student course. It holds
+    ``notebooks/`` (generated from ``solutions/``, never copied), ``dtscal_lib/`` and
+    ``data/`` without grading-only folders (:data:`EXCLUDED_DIRS`) and caches,
+    ``pyproject.toml`` (and ``LICENSE`` when present), the students' ``README.md`` and
+    ``start.sh`` (:data:`STUDENT_README`, :data:`START_SH`). It holds no ``solutions/``, no
+    ``grading/``, no ``tests/`` and no benchmarks. A folder written by an earlier release is replaced.
     After writing, the release is scanned for solution code (:func:`find_solution_leaks`).
 
     Returns
@@ -391,6 +456,10 @@ def release(out_dir, repo_root=None) -> Path:
     for f in RELEASE_FILES:
         if (root / f).is_file():
             shutil.copy2(root / f, out / f)
+    (out / "README.md").write_text(STUDENT_README, encoding="utf-8")
+    (out / "start.sh").write_text(START_SH, encoding="utf-8")
+    (out / "start.sh").chmod(0o755)
+    (out / ".gitignore").write_text(".venv/\nworkspace/\n*.egg-info/\n", encoding="utf-8")
     (out / RELEASE_MARKER).write_text("written by `dtscal release`; safe to delete and regenerate\n")
     leaks = find_solution_leaks(out, sources)
     if leaks:
@@ -404,7 +473,8 @@ def release(out_dir, repo_root=None) -> Path:
 #: lines that only convert/validate inputs (``x = np.asarray(x, dtype=float).reshape(-1, 2)``):
 #: every function starts with them, so finding one elsewhere proves nothing
 _BOILERPLATE = re.compile(
-    r"^[\w, ]+ = (np\.)?(asarray|array|atleast_2d|float|int)\((?:[^()]|\([^()]*\))*\)(\.(reshape|ravel|copy|astype)\([^()]*\))*$"
+    r"^[\w, ]+ = (np\.)?(asarray|array|atleast_2d|float|int)\((?:[^()]|\([^()]*\))*\)"
+    r"(\.(reshape|ravel|copy|astype)\([^()]*\))*$"
 )
 
 

@@ -861,7 +861,8 @@ def _floor_texture(seed: int):
         col[white] = (0.78, 0.8, 0.8)
         col[yellow] = (0.05, 0.62, 0.78)
         # tile seams every 0.585 m
-        seam = (np.abs(np.mod(X + 0.2925, 0.585) - 0.2925) < 0.002) | (np.abs(np.mod(Y + 0.2925, 0.585) - 0.2925) < 0.002)
+        seam = ((np.abs(np.mod(X + 0.2925, 0.585) - 0.2925) < 0.002)
+                | (np.abs(np.mod(Y + 0.2925, 0.585) - 0.2925) < 0.002))
         col[seam] *= 0.5
         return col.astype(np.float32) * 255.0, on_mat.astype(np.float32)
 
@@ -869,7 +870,8 @@ def _floor_texture(seed: int):
 
 
 def extrinsic_capture(seed: int = DEFAULT_SEED, *, n_frames: int = 5, mount: RobotCamera = RobotCamera(),
-                      renderer: Renderer | None = None, board: Board = DUCKIETOWN_BOARD, sheet: Sheet = A3_SHEET) -> tuple[list[SynthFrame], dict]:
+                      renderer: Renderer | None = None, board: Board = DUCKIETOWN_BOARD,
+                      sheet: Sheet = A3_SHEET) -> tuple[list[SynthFrame], dict]:
     """The robot standing on the mat with the board flat at the Duckietown placement.
 
     The robot does not move: the frames differ only in sensor noise and a slight exposure
@@ -897,8 +899,6 @@ def extrinsic_capture(seed: int = DEFAULT_SEED, *, n_frames: int = 5, mount: Rob
     # static scene: floor (with the sheet lying on it) over the room background
     background = scene_through_lens(renderer, seed)
     floor = _floor_texture(seed)
-    s = board.square
-    cx, cy = (board.cols - 1) * s / 2, (board.rows - 1) * s / 2
 
     def tex(X, Y, ok):
         col, cov = floor(X, Y, ok)

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Install the kit and open the course in JupyterLab on the bundled recorded Duckiebot session.
+# Install the kit and open the course as a student sees it: JupyterLab on workspace/ (a copy of notebooks/),
+# at notebook 01, on the bundled recorded Duckiebot session. `--instructor` opens solutions/ instead.
 # Extra arguments go to `dtscal course` (e.g. --no-browser --port 8890).
 set -euo pipefail
 cd "$(dirname "$0")/.."

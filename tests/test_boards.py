@@ -30,7 +30,8 @@ def test_parse_board_rejects(spec):
         parse_board(spec)
 
 
-@pytest.mark.parametrize("kw", [dict(cols=1, rows=5), dict(cols=7, rows=5, square=0), dict(cols=7, rows=5, square=float("nan"))])
+@pytest.mark.parametrize("kw", [dict(cols=1, rows=5), dict(cols=7, rows=5, square=0),
+                                dict(cols=7, rows=5, square=float("nan"))])
 def test_board_rejects_nonsense(kw):
     with pytest.raises(DtscalError):
         Board(**kw)

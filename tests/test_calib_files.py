@@ -5,7 +5,9 @@ from __future__ import annotations
 import copy
 import math
 import os
+import stat
 import struct
+import time
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +28,8 @@ from dtscal_lib.calib_files import (
 )
 from dtscal_lib.camera import CameraModel
 from dtscal_lib.errors import CalibrationFileError
+
+from unprivileged import run_unprivileged, shared_tmp
 
 
 def _bits(values) -> list[bytes]:
@@ -163,7 +167,8 @@ def test_hostile_tag_is_not_executed(tmp_path, loader):
     marker = tmp_path / "pwned"
     p = tmp_path / "evil.yaml"
     p.write_text(f'homography: !!python/object/apply:os.system ["touch {marker}"]\n'
-                 f'image_width: !!python/object/apply:pathlib.Path.touch [!!python/object/apply:pathlib.Path ["{marker}"]]\n')
+                 'image_width: !!python/object/apply:pathlib.Path.touch '
+                 f'[!!python/object/apply:pathlib.Path ["{marker}"]]\n')
     with pytest.raises(CalibrationFileError, match=r"evil\.yaml: contains a non-data tag .* was not loaded"):
         loader(p)
     assert not marker.exists()
@@ -481,13 +486,72 @@ def test_failed_write_midway_removes_temp(calib_dir, monkeypatch):
     assert _state(p.parent) == before
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores directory permissions")
-def test_read_only_folder(calib_dir):
+def test_read_only_folder():
+    """Real under root too: the second write runs as ``nobody`` (root ignores a folder's permissions)."""
+    with shared_tmp() as d:
+        p = save_extrinsics(dt.default_H(), d / "calibrations", "bot")
+        for folder in (d / "calibrations", p.parent):
+            os.chmod(folder, 0o555)
+        before = _state(p.parent)
+        ok, text = run_unprivileged(save_extrinsics, dt.default_H() * 2, d / "calibrations", "bot")
+        assert not ok
+        assert text.startswith("CalibrationFileError") and "could not be written" in text, text
+        assert "Permission denied" in text and "previous file is unchanged" in text
+        assert _state(p.parent) == before
+        np.testing.assert_array_equal(load_extrinsics(p), dt.default_H())
+
+
+# --------------------------------------------------------------------------- rights of replaced files
+@pytest.mark.parametrize("mode", [0o644, 0o640, 0o600, 0o664])
+def test_replaced_file_keeps_its_mode(calib_dir, mode):
     p = save_extrinsics(dt.default_H(), calib_dir, "bot")
-    os.chmod(p.parent, 0o555)
+    os.chmod(p, mode)
+    save_extrinsics(dt.default_H() * 2, calib_dir, "bot")
+    assert stat.S_IMODE(os.stat(p).st_mode) == mode
+    assert stat.S_IMODE(os.stat(p.with_name("bot.yaml.bak")).st_mode) == mode
+    c = load_intrinsics(intrinsic_path(calib_dir, "default"))
+    q = save_intrinsics(c, calib_dir, "bot")
+    os.chmod(q, mode)
+    save_intrinsics(c, calib_dir, "bot")
+    assert stat.S_IMODE(os.stat(q).st_mode) == mode
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o027, 0o077, 0o002])
+def test_new_file_follows_umask(tmp_path, umask):
+    old = os.umask(umask)
     try:
-        with pytest.raises(CalibrationFileError, match="could not be written"):
-            save_extrinsics(dt.default_H() * 2, calib_dir, "bot")
+        p = save_extrinsics(dt.default_H(), tmp_path, "bot")
     finally:
-        os.chmod(p.parent, 0o755)
-    np.testing.assert_array_equal(load_extrinsics(p), dt.default_H())
+        os.umask(old)
+    assert stat.S_IMODE(os.stat(p).st_mode) == 0o666 & ~umask
+
+
+def test_replaced_file_stays_readable_to_others():
+    """A 0644 file replaced by another user's write stays readable to everyone (was 0600)."""
+    with shared_tmp() as d:
+        folder = d / "calibrations" / "camera_extrinsic"
+        folder.mkdir(parents=True)
+        os.chmod(d / "calibrations", 0o777)
+        os.chmod(folder, 0o777)
+        p = save_extrinsics(dt.default_H(), d / "calibrations", "bot")
+        os.chmod(p, 0o644)
+        ok, text = run_unprivileged(save_extrinsics, dt.default_H() * 2, d / "calibrations", "bot")
+        assert ok, text
+        assert stat.S_IMODE(os.stat(p).st_mode) == 0o644
+        np.testing.assert_array_equal(load_extrinsics(p), dt.default_H() * 2)
+
+
+def test_stale_temporaries_are_cleaned_on_next_write(calib_dir):
+    p = save_extrinsics(dt.default_H(), calib_dir, "bot")
+    stale = [p.parent / ".bot.yaml.k1ll3d_x.tmp", p.parent / ".bot.yaml.bak.abcd_123.tmp"]
+    fresh = p.parent / ".bot.yaml.in-flight.tmp"  # not the kit's pattern: someone else's, left alone
+    young = p.parent / ".bot.yaml.wr1t1ng_.tmp"  # the kit's pattern, but a live writer's (recent)
+    other = p.parent / ".other.yaml.zzzzzzzz.tmp"  # another robot's: not ours to judge
+    for f in [*stale, fresh, young, other]:
+        f.write_text("partial")
+    old = time.time() - cf.STALE_TMP_SECONDS - 60
+    for f in [*stale, fresh, other]:
+        os.utime(f, (old, old))
+    save_extrinsics(dt.default_H() * 2, calib_dir, "bot")
+    left = sorted(f for f in os.listdir(p.parent) if f.endswith(".tmp"))
+    assert left == sorted([fresh.name, young.name, other.name])

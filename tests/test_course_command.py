@@ -32,25 +32,35 @@ def test_course_serves_notebooks(tmp_path):
         cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
     )
     try:
-        token = None
-        deadline = time.time() + 90
-        lines = []
-        while time.time() < deadline and token is None:
-            line = proc.stdout.readline().decode(errors="replace")
-            if not line and proc.poll() is not None:
-                break
-            lines.append(line)
-            if "token=" in line:
-                token = line.split("token=")[1].split()[0].strip()
-        assert token, "JupyterLab did not start:\n" + "".join(lines[-30:])
-        url = f"http://127.0.0.1:{port}/api/contents/notebooks?token={token}"
-        listing = json.loads(_get(url))
-        names = {item["name"] for item in listing["content"]}
-        assert "01_pinhole_projection.ipynb" in names
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/lab?token={token}", timeout=30) as r:
-            assert r.status == 200 and b"JupyterLab" in r.read()
+        check_student_view(proc, port)
     finally:
         _stop(proc)
+
+
+def check_student_view(proc, port: int, patience: float = 90.0) -> None:
+    """The server answers, its printed URL opens notebook 01, and no solution is in its file tree."""
+    token, url = None, None
+    deadline = time.time() + patience
+    lines = []
+    while time.time() < deadline and token is None:
+        line = proc.stdout.readline().decode(errors="replace")
+        if not line and proc.poll() is not None:
+            break
+        lines.append(line)
+        if "token=" in line and "http" in line:
+            url = line[line.index("http"):].split()[0].strip()
+            token = url.split("token=")[1]
+    assert token, "JupyterLab did not start:\n" + "".join(lines[-30:])
+    assert "/lab/tree/01_pinhole_projection.ipynb?" in url, url
+    listing = json.loads(_get(f"http://127.0.0.1:{port}/api/contents?token={token}"))
+    names = {item["name"] for item in listing["content"]}
+    assert "01_pinhole_projection.ipynb" in names and "solutions" not in names, names
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/lab/tree/01_pinhole_projection.ipynb?token={token}",
+                                timeout=30) as r:
+        assert r.status == 200 and b"JupyterLab" in r.read()
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/contents/01_pinhole_projection.ipynb?token={token}",
+                                timeout=30) as r:
+        assert r.status == 200
 
 
 def _get(url: str, patience: float = 30.0) -> bytes:

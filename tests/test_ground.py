@@ -18,7 +18,7 @@ from dtscal_lib.ground import (
     ExtrinsicResult,
     apply_homography,
     birdseye_view,
-    calibrate_extrinsics,
+    extrinsics_from_image,
     distorted_pixel_to_ground,
     draw_ground_grid,
     estimate_ground_homography,
@@ -210,7 +210,7 @@ def test_distorted_pixel_to_ground_matches_opencv(camera):
 
 # --------------------------------------------------------------------------- the procedure
 def test_calibrate_extrinsics_default_scene(camera, default_frame):
-    res = calibrate_extrinsics(default_frame, camera)
+    res = extrinsics_from_image(default_frame, camera)
     assert isinstance(res, ExtrinsicResult)
     assert res.corners_rectified.shape == (35, 2) and res.ground.shape == (35, 2)
     np.testing.assert_array_equal(res.ground, ground_points())
@@ -230,46 +230,46 @@ def test_calibrate_extrinsics_default_scene(camera, default_frame):
 def test_calibrate_extrinsics_posed_cameras(camera, height, pitch, yaw):
     H_true = pose_homography(camera.rectified_K, height, pitch, yaw)
     frame = render_board_frame(camera, H_true)
-    res = calibrate_extrinsics(frame, camera)
+    res = extrinsics_from_image(frame, camera)
     err = _corner_error_mm(res.H, H_true)
     assert err.max() < 3.0, err.max()
 
 
 def test_calibrate_extrinsics_resizes_other_widths(camera, default_frame):
     big = cv2.resize(default_frame, (1280, 960), interpolation=cv2.INTER_CUBIC)
-    res = calibrate_extrinsics(big, camera)
+    res = extrinsics_from_image(big, camera)
     assert res.rectified.shape[:2] == (480, 640)
     assert _corner_error_mm(res.H, dt.default_H()).max() < 3.0
     grey_small = cv2.resize(cv2.cvtColor(default_frame, cv2.COLOR_BGR2GRAY), (960, 720))
-    res2 = calibrate_extrinsics(grey_small, camera)
+    res2 = extrinsics_from_image(grey_small, camera)
     assert _corner_error_mm(res2.H, dt.default_H()).max() < 3.0
 
 
 def test_calibrate_extrinsics_wrong_aspect(camera, default_frame):
     with pytest.raises(CalibrationError, match="calibrated at 640x480"):
-        calibrate_extrinsics(cv2.resize(default_frame, (640, 360)), camera)
+        extrinsics_from_image(cv2.resize(default_frame, (640, 360)), camera)
 
 
 def test_calibrate_extrinsics_no_board(camera):
     blank = np.full((480, 640, 3), 128, np.uint8)
     with pytest.raises(CalibrationError, match="place the robot on the board"):
-        calibrate_extrinsics(blank, camera)
+        extrinsics_from_image(blank, camera)
 
 
 def test_calibrate_extrinsics_board_at_border(camera):
     # robot turned 29 degrees: the board's left end reaches the rectified image's right edge
     frame = render_board_frame(camera, pose_homography(camera.rectified_K, 0.10, 20, 29))
     with pytest.raises(CalibrationError, match="within 8 px of the rectified image's edge"):
-        calibrate_extrinsics(frame, camera)
+        extrinsics_from_image(frame, camera)
 
 
 def test_calibrate_extrinsics_rejects_bad_input(camera):
     with pytest.raises(CalibrationError, match="uint8"):
-        calibrate_extrinsics(np.zeros((480, 640), np.float32), camera)
+        extrinsics_from_image(np.zeros((480, 640), np.float32), camera)
     with pytest.raises(CalibrationError, match="non-empty"):
-        calibrate_extrinsics(np.zeros((0, 0), np.uint8), camera)
+        extrinsics_from_image(np.zeros((0, 0), np.uint8), camera)
     with pytest.raises(CalibrationError, match="CameraModel"):
-        calibrate_extrinsics(np.zeros((480, 640), np.uint8), "camera")
+        extrinsics_from_image(np.zeros((480, 640), np.uint8), "camera")
 
 
 # --------------------------------------------------------------------------- views

@@ -6,7 +6,8 @@ import nbformat
 import pytest
 
 from dtscal_lib.release import inject_solutions
-from nbtools import COURSE, NOTEBOOK_BUDGET_S, NOTEBOOKS, SOLUTIONS, cell_errors, execute, exercise_functions, need, reports
+from nbtools import (COURSE, NOTEBOOK_BUDGET_S, NOTEBOOKS, SOLUTIONS, cell_errors, execute, exercise_functions, need,
+                     reports)
 
 pytestmark = pytest.mark.slow
 

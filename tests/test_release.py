@@ -27,7 +27,8 @@ def toy(exercise_source=EXERCISE, extra_cells=()):
     nb.metadata = {"kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"},
                    "language_info": {"name": "python", "version": "3.11.9"}, "widgets": {"state": {}}}
     imports = new_code_cell("import numpy as np\n%matplotlib inline", metadata={"tags": ["imports"]})
-    ex = new_code_cell(exercise_source, metadata={"tags": ["exercise"], "execution": {"iopub.status.busy": "2024-01-01T00:00:00Z"}, "scrolled": True})
+    ex = new_code_cell(exercise_source, metadata={"tags": ["exercise"], "scrolled": True,
+                                                  "execution": {"iopub.status.busy": "2024-01-01T00:00:00Z"}})
     ex.outputs = [new_output("stream", name="stdout", text="hello")]
     ex.execution_count = 3
     nb.cells = [new_markdown_cell("# Toy"), imports, ex, new_code_cell("double(2)"), *extra_cells]
@@ -206,8 +207,9 @@ def test_release_layout_on_a_toy_kit(tmp_path):
     root = _toy_repo(tmp_path)
     out = rel.release(tmp_path / "student", repo_root=root)
     files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
-    assert files == [rel.RELEASE_MARKER, "README.md", "data/truth.yaml", "dtscal_lib/__init__.py",
-                     "notebooks/01_toy.ipynb", "pyproject.toml"]
+    assert files == [rel.RELEASE_MARKER, ".gitignore", "README.md", "data/truth.yaml", "dtscal_lib/__init__.py",
+                     "notebooks/01_toy.ipynb", "pyproject.toml", "start.sh"]
+    assert (out / "README.md").read_text() == rel.STUDENT_README and "bash start.sh" in rel.STUDENT_README
     assert "2 * x" not in (out / "notebooks" / "01_toy.ipynb").read_text()
 
 

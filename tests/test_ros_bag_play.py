@@ -24,9 +24,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from ci import missing as missing_in_ci
 import yaml
 
+from ci import missing as missing_in_ci
 from dtscal_lib.sources import open_source, write_compressed_image_bag
 
 pytestmark = pytest.mark.slow
@@ -129,10 +129,16 @@ def _log(path: Path) -> str:
 @pytest.fixture(scope="module")
 def roscore(ros_ok, tmp_path_factory):
     """A private ROS master; yields the environment for ROS processes that use it."""
-    home = tmp_path_factory.mktemp("roshome")
-    port = _free_port()
+    with running_roscore(tmp_path_factory.mktemp("roshome")) as env:
+        yield env
+
+
+@contextmanager
+def running_roscore(home: Path, port: int | None = None):
+    """Start ``roscore`` on ``port`` (default a free one), wait until it answers, yield the ROS environment."""
+    port = port or _free_port()
     env = _ros_env(home, port)
-    log = home / "roscore.log"
+    log = home / f"roscore-{port}-{time.time_ns()}.log"
     with _started([_ros_tool("roscore"), "-p", str(port)], env, log) as core:
         master = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"])
         deadline = time.time() + 60

@@ -456,7 +456,8 @@ def test_raw_image_topic(tmp_path):
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC)
-    Image, Hd, T = (ts.types[n] for n in ("sensor_msgs/msg/Image", "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
+    names = ("sensor_msgs/msg/Image", "std_msgs/msg/Header", "builtin_interfaces/msg/Time")
+    Image, Hd, T = (ts.types[n] for n in names)
     bgr = picture(2, (32, 24))
     msgs = [
         Image(header=Hd(seq=0, stamp=T(sec=5, nanosec=0), frame_id=""), height=24, width=32, encoding="rgb8",

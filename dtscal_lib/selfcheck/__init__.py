@@ -141,7 +141,7 @@ def expect_close(value, expected, atol: float, what: str, rtol: float = 0.0) -> 
 
 # The notebooks import every check from here (``from dtscal_lib.selfcheck import check_...``);
 # the modules below import the helpers above, so they come last.
-from .projection import check_project_points, use_or_fallback  # noqa: E402
+from .projection import check_project_points  # noqa: E402
 from .homography import check_apply_homography, check_estimate_homography  # noqa: E402
 from .zhang import (  # noqa: E402
     check_extrinsics_from_homography,

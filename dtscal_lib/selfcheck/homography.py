@@ -16,14 +16,13 @@ import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
 from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
-from .projection import K_DUCKIE, random_pose, use_or_fallback
+from .projection import K_DUCKIE, random_pose
 
 __all__ = [
     "check_apply_homography",
     "check_estimate_homography",
     "board_homography",
     "transfer_rms",
-    "use_or_fallback",
     "NOISY_TOLERANCE",
 ]
 

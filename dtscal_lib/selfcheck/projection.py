@@ -5,12 +5,12 @@ against OpenCV's ``cv2.projectPoints`` and against pixels known by construction 
 is chosen first and a 3-D point placed on its ray), never against a second copy of the
 solution.
 
-:func:`use_or_fallback` lets later cells run before the student's function works.
+Later cells use the course's one fallback contract, :func:`dtscal_lib.course.use_or_fallback`.
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -19,35 +19,12 @@ from ..boards import DUCKIETOWN_BOARD
 from ..camera import intrinsic_matrix, pixel_to_normalized
 from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 
-__all__ = ["check_project_points", "use_or_fallback", "random_pose", "K_DUCKIE", "K_SKEWED"]
+__all__ = ["check_project_points", "random_pose", "K_DUCKIE", "K_SKEWED"]
 
 #: a Duckiebot-like camera (fx, fy, cx, cy near the shipped default.yaml)
 K_DUCKIE = intrinsic_matrix(307.7, 315.0, 329.7, 244.5)
 #: the same with a visible skew: catches code that ignores K[0, 1]
 K_SKEWED = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=6.0)
-
-
-def use_or_fallback(fn: Callable, fallback: Callable, *args, what: str = "", **kwargs) -> Any:
-    """Call the student's ``fn(*args)``; if it is not written yet or fails, use ``fallback``.
-
-    A clear message is printed whenever the fallback is used, so a figure drawn from the
-    library's result is never mistaken for the student's.
-
-    Parameters
-    ----------
-    fn : the student's function
-    fallback : a library/OpenCV function with the same arguments and result
-    what : names the fallback in the message, e.g. ``"OpenCV's cv2.findHomography"``
-    """
-    name = getattr(fn, "__name__", "your function")
-    label = what or getattr(fallback, "__name__", "the library's result")
-    try:
-        return fn(*args, **kwargs)
-    except NotImplementedError:
-        print(f">>> {name} is not written yet: using {label} until your function works.")
-    except Exception as exc:  # a student's bug must not stop the notebook
-        print(f">>> {name} raised {type(exc).__name__}: {exc}\n>>> using {label} until your function works.")
-    return fallback(*args, **kwargs)
 
 
 # --------------------------------------------------------------------------- ground truth

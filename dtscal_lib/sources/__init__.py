@@ -20,7 +20,8 @@ and the next frame follows. A bag cut short yields every message still readable,
 last frame with reason ``"truncated"``. Only a source that cannot be opened at all raises
 :class:`~dtscal_lib.errors.SourceError`, with a message that says what to pass instead.
 
-A live ROS topic source is not here yet.
+Live cameras (a Duckiebot over ROS 1, a webcam, a stream, a recording played as a camera) are
+:func:`~dtscal_lib.sources.live.open_live` in :mod:`dtscal_lib.sources.live`.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from .bag import BagSource, list_image_topics, write_compressed_image_bag
 from .decode import decode_image, describe_file_type
 from .files import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, StillsSource, VideoSource, folder_source, glob_source
 from .frame import Frame, FrameSource
+from .live import LiveSource, LiveStatus, open_live
 
 _GLOB_CHARS = set("*?[")
 
@@ -145,4 +147,7 @@ __all__ = [
     "decode_image",
     "write_compressed_image_bag",
     "list_image_topics",
+    "LiveSource",
+    "LiveStatus",
+    "open_live",
 ]

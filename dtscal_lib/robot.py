@@ -1,0 +1,161 @@
+"""COMMIT: send a calibration to a Duckiebot.
+
+* Intrinsics go where ROS's ``cameracalibrator`` sends them: the camera node's
+  ``/<ROBOT>/camera_node/set_camera_info`` service (``sensor_msgs/SetCameraInfo``). The
+  Duckiebot's camera node writes what it receives to
+  ``/data/config/calibrations/camera_intrinsic/<ROBOT>.yaml`` and answers with a status message.
+  The call is made by Debian's ``rospy`` in a helper process (see :mod:`dtscal_lib.sources.live`).
+* Extrinsics have no ROS service on a Duckiebot. Duckietown's current extrinsic tool uploads the
+  file with an HTTP POST to the robot's file server,
+  ``http://<ROBOT>.local/files/data/config/calibrations/camera_extrinsic/<ROBOT>.yaml``;
+  :func:`commit_extrinsics` does the same with the file the kit wrote (classic or version 2).
+
+Every failure raises :class:`CommitError` with what to do; the local file is never touched.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import urllib.error
+import urllib.parse
+import urllib.request
+from pathlib import Path
+
+import yaml
+
+from . import calib_files
+from .errors import DtscalError
+
+#: where the robot keeps its calibrations
+ROBOT_CALIBRATIONS = "/data/config/calibrations"
+
+
+class CommitError(DtscalError):
+    """A calibration could not be sent to the robot; the message says what to do (the local file is intact)."""
+
+
+def _robot(robot: str) -> str:
+    if not isinstance(robot, str) or not robot or not all(c.isalnum() or c == "_" for c in robot):
+        raise CommitError(f"robot name {robot!r} is not a Duckiebot name (letters, digits, '_'); pass --robot NAME")
+    return robot
+
+
+def _by_hand(kind: str, robot: str, calib_file) -> str:
+    return (f"the file {calib_file} is kept; to install it by hand: scp {calib_file} "
+            f"duckie@{robot}.local:{ROBOT_CALIBRATIONS}/{kind}/{robot}.yaml and restart the robot's interface "
+            f"container (`dts duckiebot ...` or `docker -H {robot}.local restart duckiebot-interface`)")
+
+
+def camera_info_dict(calib: calib_files.IntrinsicCalibration, frame_id: str = "") -> dict:
+    """The fields of a ``sensor_msgs/CameraInfo`` for an intrinsic calibration (plain lists)."""
+    return {"width": int(calib.width), "height": int(calib.height), "distortion_model": calib.distortion_model,
+            "D": [float(v) for v in calib.D], "K": [float(v) for v in calib.K.ravel()],
+            "R": [float(v) for v in calib.R.ravel()], "P": [float(v) for v in calib.P.ravel()],
+            "frame_id": frame_id}
+
+
+def commit_intrinsics(robot: str, calib_file, *, master_uri: str | None = None, timeout: float = 10.0) -> str:
+    """Send an intrinsic YAML to ``/<robot>/camera_node/set_camera_info``, as ROS's calibrator's COMMIT does.
+
+    Parameters
+    ----------
+    robot : the Duckiebot's name
+    calib_file : a ``camera_intrinsic/<robot>.yaml`` (validated before anything is sent)
+    master_uri : the robot's ROS master (default ``$ROS_MASTER_URI``)
+    timeout : seconds to wait for the service to appear
+
+    Returns
+    -------
+    str : the service's ``status_message`` (the camera node says where it wrote the file)
+
+    Raises
+    ------
+    CommitError
+        ROS missing on this computer, master unreachable, no such service, the node refused.
+    """
+    from .sources.live import run_ros_helper
+
+    robot = _robot(robot)
+    try:
+        calib = calib_files.load_intrinsics(calib_file)
+    except DtscalError as exc:
+        raise CommitError(f"nothing was sent to {robot}: {exc}") from None
+    service = f"/{robot}/camera_node/set_camera_info"
+    request = json.dumps(camera_info_dict(calib, frame_id=f"{robot}/camera_optical_frame")).encode()
+    try:
+        proc = run_ros_helper(["set_camera_info", service, f"{float(timeout):g}"], master=master_uri,
+                              stdin=request, timeout=float(timeout) + 60.0)
+    except DtscalError as exc:
+        raise CommitError(f"cannot talk ROS to {robot}: {exc}. {_by_hand('camera_intrinsic', robot, calib_file)}") \
+            from None
+    except subprocess.TimeoutExpired:
+        raise CommitError(f"{service} did not answer within {timeout + 60:g} s; "
+                          f"{_by_hand('camera_intrinsic', robot, calib_file)}") from None
+    lines = proc.stdout.decode(errors="replace").strip().splitlines()
+    try:
+        answer = json.loads(lines[-1])
+    except (IndexError, ValueError):
+        err = " | ".join(proc.stderr.decode(errors="replace").strip().splitlines()[-3:])
+        raise CommitError(f"the ROS helper failed (exit {proc.returncode}): {err or 'no output'}; "
+                          f"{_by_hand('camera_intrinsic', robot, calib_file)}") from None
+    if answer.get("ok"):
+        return str(answer.get("message", ""))
+    advice = {
+        "no_master": "check that the robot is on and that ROS_MASTER_URI (or --master-uri) points at it, "
+                     f"e.g. http://{robot}.local:11311",
+        "no_service": f"is the camera node of {robot} running? (`rosservice list | grep set_camera_info`)",
+        "refused": "the camera node refused the calibration",
+    }.get(answer.get("kind"), "")
+    raise CommitError(f"COMMIT to {robot} failed: {answer.get('message')}" + (f"; {advice}" if advice else "")
+                      + f". {_by_hand('camera_intrinsic', robot, calib_file)}")
+
+
+def robot_files_url(robot: str, master_uri: str | None = None, kind: str = "camera_extrinsic") -> str:
+    """``http://<host>/files/data/config/calibrations/<kind>/<robot>.yaml`` on the robot's file server.
+
+    The host is that of ``master_uri`` when given (the robot runs its master), else ``<robot>.local``.
+    """
+    host = urllib.parse.urlparse(master_uri).hostname if master_uri else None
+    return f"http://{host or robot + '.local'}/files{ROBOT_CALIBRATIONS}/{kind}/{robot}.yaml"
+
+
+def commit_extrinsics(robot: str, calib_file, *, master_uri: str | None = None, timeout: float = 10.0,
+                      url: str | None = None) -> str:
+    """Upload an extrinsic file to the robot the way Duckietown's current extrinsic tool does (HTTP POST).
+
+    The file's bytes are posted unchanged to ``url`` (default :func:`robot_files_url`), where
+    the robot's file server stores them as ``camera_extrinsic/<robot>.yaml``. Returns a sentence
+    saying where it went. There is no ROS service for extrinsics on a Duckiebot.
+    """
+    robot = _robot(robot)
+    path = Path(calib_file)
+    try:
+        body = path.read_bytes()
+        doc = yaml.safe_load(body)
+        if not isinstance(doc, dict) or "homography" not in doc:
+            raise CommitError(f"{path} is not an extrinsic file (no homography:); nothing was sent")
+        if "version" not in doc:
+            calib_files.load_extrinsics(path)  # validate the classic file before sending it
+    except (OSError, yaml.YAMLError) as exc:
+        raise CommitError(f"cannot read {path} ({exc}); nothing was sent") from None
+    except CommitError:
+        raise
+    except DtscalError as exc:
+        raise CommitError(f"nothing was sent to {robot}: {exc}") from None
+    target = url or robot_files_url(robot, master_uri)
+    req = urllib.request.Request(target, data=body, method="POST", headers={"Content-Type": "text/plain"})
+    try:
+        with urllib.request.urlopen(req, timeout=float(timeout)) as resp:
+            code = resp.status
+    except urllib.error.HTTPError as exc:
+        raise CommitError(f"the robot's file server refused the upload to {target} (HTTP {exc.code}); "
+                          f"{_by_hand('camera_extrinsic', robot, path)}") from None
+    except (urllib.error.URLError, OSError) as exc:
+        reason = getattr(exc, "reason", exc)
+        raise CommitError(f"cannot reach the robot's file server at {target} ({reason}); is {robot} on the "
+                          f"network? {_by_hand('camera_extrinsic', robot, path)}") from None
+    return f"uploaded {path} to {target} (HTTP {code})"
+
+
+__all__ = ["CommitError", "camera_info_dict", "commit_extrinsics", "commit_intrinsics", "robot_files_url"]
