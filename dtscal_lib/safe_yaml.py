@@ -89,8 +89,9 @@ class _BoundedLoader(yaml.SafeLoader):
         alias = self.check_event(yaml.AliasEvent)
         if self.depth >= MAX_DEPTH:
             mark = self.peek_event().start_mark
-            raise _fail(self.where, f"the YAML document nests more than {MAX_DEPTH} levels deep (line {mark.line + 1}); "
-                                    "a calibration file nests 2 levels: fix the file or restore it from default.yaml")
+            raise _fail(self.where, f"the YAML document nests more than {MAX_DEPTH} levels deep (line "
+                                    f"{mark.line + 1}); a calibration file nests 2 levels: fix the file or restore "
+                                    "it from default.yaml")
         self.depth += 1
         try:
             node = super().compose_node(parent, index)
