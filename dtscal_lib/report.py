@@ -39,6 +39,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from .course.figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
+
 from .errors import DtscalError
 from .quality import REGION_NAMES, Quality, assess
 
@@ -68,7 +70,7 @@ def fig_view_rms(result, quality: Quality | None = None) -> Figure:
     q = _q(result, quality)
     pv = np.asarray(result.per_view_rms)
     flagged = set(v for f in q.findings if f.code in ("outlier_views", "column_offset", "row_offset") for v in f.views)
-    fig = Figure(figsize=(8, 3.2), layout="constrained")
+    fig = CourseFigure(figsize=(8, 3.2), layout="constrained")
     ax = fig.add_subplot()
     colours = ["#c62828" if v in flagged else "#4c72b0" for v in range(len(pv))]
     ax.bar(np.arange(len(pv)), pv, color=colours, width=0.8)
@@ -87,7 +89,7 @@ def fig_worst_residuals(result, quality: Quality | None = None, n: int = 4) -> F
     """Residual vectors (observed -> projected, magnified) of the ``n`` views with the largest RMS."""
     q = _q(result, quality)
     worst = list(np.argsort(-np.asarray(result.per_view_rms))[:n])
-    fig = Figure(figsize=(4.2 * len(worst), 3.6), layout="constrained")
+    fig = CourseFigure(figsize=(4.2 * len(worst), 3.6), layout="constrained")
     big = max(float(np.abs(np.concatenate([q.residuals[v] for v in worst])).max()), 1e-12)
     scale = 25.0 / big  # the longest arrow is 25 px long on the image
     for k, v in enumerate(worst):
@@ -110,7 +112,7 @@ def fig_residual_histogram(result, quality: Quality | None = None) -> Figure:
     """Histogram of all residual coordinates against the noise model's Gaussian."""
     q = _q(result, quality)
     e = np.concatenate(q.residuals).ravel()
-    fig = Figure(figsize=(6, 3.4), layout="constrained")
+    fig = CourseFigure(figsize=(6, 3.4), layout="constrained")
     ax = fig.add_subplot()
     lim = max(4 * q.noise_sigma, float(np.quantile(np.abs(e), 0.995)))
     bins = np.linspace(-lim, lim, 61)
@@ -130,7 +132,7 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
     """1-sigma (worst direction) projection uncertainty over the image, observed corners on top."""
     q = _q(result, quality)
     u = q.uncertainty
-    fig = Figure(figsize=(6.4, 5), layout="constrained")
+    fig = CourseFigure(figsize=(6.4, 5), layout="constrained")
     ax = fig.add_subplot()
     if u is None:
         ax.text(0.5, 0.5, "uncertainty not computed", ha="center", va="center", transform=ax.transAxes)
@@ -165,7 +167,7 @@ def fig_coverage(result, quality: Quality | None = None) -> Figure:
     """Every observed corner on the image, with the count per ninth of the image."""
     q = _q(result, quality)
     w, h = result.image_size
-    fig = Figure(figsize=(6.4, 5), layout="constrained")
+    fig = CourseFigure(figsize=(6.4, 5), layout="constrained")
     ax = fig.add_subplot()
     for v, p in enumerate(result.image_points):
         p = np.asarray(p).reshape(-1, 2)

@@ -1,0 +1,258 @@
+"""The live extrinsic tool: Duckietown's ground calibration with a live view and a validation view.
+
+With the robot standing on the board (Duckietown's placement, see :mod:`dtscal_lib.boards`),
+every frame is rectified with the intrinsic calibration, the board detected and the ground
+homography fitted (:func:`dtscal_lib.ground.calibrate_extrinsics`). The tool shows
+
+* the rectified camera view with the detected corners,
+* a top view of the board: where the fitted homography puts each detected corner against
+  its true ground position (errors drawn magnified), and the fit error in millimetres now and
+  the best so far,
+* a validation view with the best homography: the ground grid drawn back on the live image
+  and a bird's-eye view of the scene.
+
+SAVE writes the *best* homography as ``camera_extrinsic/<ROBOT>.yaml`` into the calibration
+folder (Duckietown's classic ``homography:`` file).
+
+Examples
+--------
+>>> tool = LiveExtrinsics("data/session/extrinsics.bag", intrinsics=calibrator)   # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .. import calib_files
+from ..boards import DUCKIETOWN_BOARD, Board, ground_points
+from ..camera import CameraModel, rectify_image
+from ..errors import DtscalError
+from ..ground import birdseye_view, calibrate_extrinsics, draw_ground_grid, pixel_to_ground
+from . import render
+from ..sources.live import open_live
+from .frameloop import FrameLoop
+from .intrinsic import robot_of
+
+
+class LiveExtrinsics:
+    """Live ground (extrinsic) calibration of a camera source in JupyterLab.
+
+    Parameters
+    ----------
+    source : str or live source (``"ros:ROBOT"``, a recording, ...)
+    intrinsics : CameraModel, path of a ``camera_intrinsic`` YAML, or a
+        :class:`~dtscal_lib.ui.intrinsic.LiveCalibrator` (its calibration is used as soon as
+        there is one)
+    board, robot, calibration_dir, realtime, loop, autostart : as for the calibrator; a
+        recording loops by default (the robot stands still on the board)
+    """
+
+    def __init__(self, source, intrinsics, *, board: Board = DUCKIETOWN_BOARD, robot: str | None = None,
+                 calibration_dir="calibrations", realtime: bool = True, loop: bool = True,
+                 autostart: bool = True):
+        import ipywidgets as w
+
+        self.board = board
+        self.spec = str(getattr(source, "spec", source))
+        self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
+        self.robot = robot or robot_of(self.spec, self.source) or "camera"
+        if isinstance(intrinsics, (str, Path)):
+            intrinsics = calib_files.load_intrinsics(intrinsics).camera()
+        self._intrinsics = intrinsics
+        self.ground_true = ground_points(board)
+        self.current = None
+        self.best = None
+        self.best_frame = -1
+        self.reason = ""
+        self.bad: Counter = Counter()
+        self.frames_seen = 0
+        self.state = "connecting"
+        self._lock = threading.RLock()
+        self._maps_for = None
+        self._maps = None
+
+        lay = w.Layout
+        self.status = w.HTML(render.message_html(f"connecting to {self.spec} ..."))
+        self.image = w.Image(format="jpeg", layout=lay(width="480px"))
+        self.top = w.Image(format="jpeg", layout=lay(width="320px"))
+        self.error_text = w.HTML("fit error: -")
+        self.grid = w.Image(format="jpeg", layout=lay(width="480px"))
+        self.birdseye = w.Image(format="jpeg", layout=lay(width="320px"))
+        self.save_button = w.Button(description="SAVE", disabled=True, button_style="success",
+                                    tooltip="write the best homography so far")
+        self.reset_button = w.Button(description="RESET BEST")
+        self.reconnect_button = w.Button(description="RECONNECT", icon="refresh")
+        self.robot_text = w.Text(value=self.robot, description="robot")
+        self.folder_text = w.Text(value=str(calibration_dir), description="folder", layout=lay(width="420px"))
+        self.format = w.Dropdown(options=[("classic (homography: 9 values)", "classic"),
+                                          ('version "2" (resolution-independent)', "2")],
+                                 value="classic", description="format")
+        self.target = w.Dropdown(options=[("calibration folder", "folder"), ("folder and robot (upload)", "robot")],
+                                 value="robot" if self.spec.startswith("ros:") else "folder", description="save to")
+        self.message = w.HTML("")
+        for b, fn in ((self.save_button, self.save), (self.reset_button, self.reset_best),
+                      (self.reconnect_button, self.reconnect)):
+            b.on_click(lambda _b, fn=fn: fn())
+        self.robot_text.observe(lambda ch: setattr(self, "robot", ch["new"].strip()), "value")
+        self.widget = w.VBox([
+            self.status,
+            w.HBox([self.image, w.VBox([w.HTML("<b>top view of the board</b>"), self.top, self.error_text])]),
+            w.HBox([self.save_button, self.reset_button, self.reconnect_button, self.robot_text]),
+            w.HBox([self.folder_text, self.format, self.target]), self.message,
+            w.HTML("<b>validation</b> with the best homography: ground grid (5 cm) on the live image, "
+                   "and a bird's-eye view"),
+            w.HBox([self.grid, self.birdseye]),
+        ])
+        self.loop = FrameLoop(self.source, self._on_frame, self._on_status)
+        if autostart:
+            self.loop.start()
+
+    def _repr_mimebundle_(self, **kw):
+        bundle = self.widget._repr_mimebundle_(**kw)
+        # the widget's own text form changes with every frame; this one is stable (stored outputs)
+        bundle["text/plain"] = "live extrinsic tool (shown as a widget in JupyterLab)"
+        return bundle
+
+    # ------------------------------------------------------------------ intrinsics
+    def camera(self) -> CameraModel | None:
+        """The intrinsic calibration in use (None while a live calibrator has none yet)."""
+        src = self._intrinsics
+        if isinstance(src, CameraModel) or src is None:
+            return src
+        return src.camera()
+
+    def _rectify(self, img, cam: CameraModel):
+        old = self._maps_for
+        same = old is not None and np.array_equal(old.K, cam.K) and np.array_equal(old.dist, cam.dist)
+        if old is not cam and not same:
+            self._maps = cam.rectification_maps()
+            if old is not None:  # a new intrinsic calibration: fits made with the old one no longer count
+                self.reset_best()
+        self._maps_for = cam
+        return rectify_image(img, self._maps)
+
+    # ------------------------------------------------------------------ frame loop
+    def _on_status(self, st) -> None:
+        self.state = st.state
+        bad = ", ".join(f"{k} {v}" for k, v in sorted(st.bad.items()))
+        text = {"connecting": f"connecting to {self.spec} ...", "running": f"live: {self.spec}",
+                "ended": f"source ended: {st.message}; the best fit is kept. RECONNECT to go on.",
+                "error": f"source lost: {st.message}; the best fit is kept. RECONNECT when it is back."}.get(
+            st.state, st.message)
+        if bad:
+            text += f" (skipped frames: {bad})"
+        self.status.value = render.message_html(text, "error" if st.state in ("ended", "error") else "info")
+
+    def _on_frame(self, frame) -> bool | None:
+        arrival = getattr(frame, "arrival", None) or time.time()
+        img = frame.image
+        if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
+            self.bad["odd_frame"] += 1
+            return False
+        self.frames_seen += 1
+        cam = self.camera()
+        if cam is None:
+            with self.image.hold_sync():
+                self.image.value = render.encode_jpeg(img)
+                self.image._dom_classes = render.stamp_classes(frame.index, arrival)
+            self.error_text.value = render.message_html(
+                "waiting for an intrinsic calibration: CALIBRATE in the calibrator above", "error")
+            return
+        if (img.shape[1], img.shape[0]) != cam.size:
+            self.bad["size_mismatch"] += 1
+            return False
+        rect = self._rectify(img, cam)
+        try:
+            res = calibrate_extrinsics(img, cam, self.board)
+        except DtscalError as exc:
+            res, self.reason = None, str(exc)
+        except cv2.error:
+            res, self.reason = None, "OpenCV could not process this frame"
+            self.bad["detector_error"] += 1
+        view = rect.copy()
+        fit = None
+        if res is not None:
+            err = float(np.mean(res.residual_mm))
+            with self._lock:
+                self.current = res
+                if self.best is None or err < float(np.mean(self.best.residual_mm)):
+                    self.best, self.best_frame = res, frame.index
+                best = self.best
+            for p in res.corners_rectified:
+                cv2.circle(view, (int(round(p[0])), int(round(p[1]))), 3, (0, 0, 255), -1, cv2.LINE_AA)
+            fit = pixel_to_ground(res.H, res.corners_rectified)
+            best_err = float(np.mean(best.residual_mm))
+            self.error_text.value = (
+                f'<div class="dtscal-fit" data-now="{err:.4f}" data-best="{best_err:.4f}">'
+                f"fit error now: <b>{err:.2f} mm</b> (max {np.max(res.residual_mm):.2f} mm)<br>"
+                f"best so far: <b>{best_err:.2f} mm</b> (frame {self.best_frame})</div>")
+            if self.save_button.disabled:
+                self.save_button.disabled = False
+        else:
+            with self._lock:
+                self.current = None
+                best = self.best
+            self.error_text.value = render.message_html(f"no fit on this frame: {self.reason}", "error")
+        with self.image.hold_sync():
+            self.image.value = render.encode_jpeg(view)
+            self.image._dom_classes = render.stamp_classes(frame.index, arrival)
+        self.top.value = render.encode_jpeg(render.top_view(self.ground_true, fit))
+        if best is not None:
+            self.grid.value = render.encode_jpeg(draw_ground_grid(rect, best.H))
+            self.birdseye.value = render.encode_jpeg(birdseye_view(rect, best.H, px_per_m=600))
+
+    # ------------------------------------------------------------------ actions
+    def save(self) -> str:
+        """Write the best homography so far as ``camera_extrinsic/<ROBOT>.yaml`` in the folder
+        (classic or version-2 format) and, with the target "robot", upload it to the robot."""
+        with self._lock:
+            best, frame = self.best, self.best_frame
+        if best is None:
+            return self._say("nothing to save yet: no frame gave a fit", "error")
+        try:
+            robot = calib_files.check_robot_name(self.robot)
+            cam = self.camera()
+            calib = calib_files.IntrinsicCalibration.from_camera(cam, camera_name=f"/{robot}/camera_node")
+            path = calib_files.save_extrinsics_as(best.H, self.folder_text.value.strip(), robot,
+                                                  fmt=self.format.value, intrinsics=calib)
+            text = (f"SAVE: wrote {path} (best fit, frame {frame}, mean error "
+                    f"{np.mean(best.residual_mm):.2f} mm)")
+            if self.target.value == "robot":
+                from ..robot import commit_extrinsics
+
+                text += "; " + commit_extrinsics(robot, path, master_uri=getattr(self.source, "master", None))
+        except (DtscalError, OSError) as exc:
+            return self._say(f"SAVE failed: {exc}. The previous file is unchanged.", "error")
+        return self._say(text, "ok")
+
+    def reset_best(self) -> None:
+        """Forget the best fit (e.g. after moving the robot on the board)."""
+        with self._lock:
+            self.best, self.best_frame = None, -1
+        self.save_button.disabled = True
+
+    def _say(self, text: str, kind: str = "info") -> str:
+        self.message.value = render.message_html(text, kind)
+        return text
+
+    def reconnect(self) -> str:
+        try:
+            self.loop.reconnect()
+        except DtscalError as exc:
+            return self._say(f"RECONNECT failed: {exc}", "error")
+        return self._say(f"reconnecting to {self.spec}")
+
+    def close(self) -> None:
+        self.loop.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,479 @@
+"""The live intrinsic calibrator: ROS's ``cameracalibrator.py`` as an ipywidgets application.
+
+Every frame of the source is searched for the board with the fast detector
+(:func:`dtscal_lib.detect.detect_board`), drawn, sent to the browser as one JPEG and offered
+to ROS's coverage rule (:class:`dtscal_lib.coverage.CoverageTracker`). The four X / Y / Size /
+Skew bars turn green when full; CALIBRATE is enabled by ROS's rule (all bars full, or 40
+samples) and runs in its own thread, so the image and the bars keep moving while it works
+(ROS's window freezes: image_pipeline issue 762). The results panel shows K, the distortion,
+the RMS error, a per-sample error chart and the standard deviations; an undistorted preview
+with an alpha slider follows. COMMIT sends the calibration to the robot over ROS
+(``set_camera_info``) or writes ``camera_intrinsic/<ROBOT>.yaml`` into a calibration folder;
+SAVE writes the samples and the YAML into one zip that :meth:`LiveCalibrator.load` reads back.
+
+All state lives in one :class:`LiveCalibrator` object; every button has a method of the same
+name, so the tool can be driven from Python (tests, scripts) as well as by clicks.
+
+Examples
+--------
+>>> app = LiveCalibrator("data/session/intrinsics.bag")     # doctest: +SKIP
+>>> app                                                       # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import html
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .. import calib_files
+from ..boards import DUCKIETOWN_BOARD, Board
+from ..camera import CameraModel
+from ..coverage import CoverageTracker
+from ..detect import detect_board, draw_detection
+from ..errors import DtscalError
+from ..pipeline import MIN_SAMPLES, calibrate_without_outlier_views, robot_from_topic
+from . import render
+from .archive import load_session, save_session
+from ..sources.live import open_live
+from .frameloop import FrameLoop
+from .solver import SolverProcess, assess_quality
+
+
+def robot_of(spec: str, source=None) -> str | None:
+    """The robot a source belongs to: ``ros:NAME`` -> NAME; a bag's camera topic -> its robot."""
+    spec = str(spec)
+    if spec.startswith("ros:"):
+        return spec[4:].strip("/") or None
+    name = getattr(source, "robot", None) or robot_from_topic(getattr(source, "topic", None))
+    if name is None and spec.endswith(".bag"):
+        try:
+            from ..sources import open_source
+
+            name = robot_from_topic(open_source(spec).topic)
+        except DtscalError:
+            name = None
+    return name
+
+
+def verdict_html(quality) -> str | None:
+    """The verdict part of the results panel from :func:`~dtscal_lib.ui.solver.assess_quality`."""
+    if quality is None:
+        return None
+    if isinstance(quality, str):
+        return render.message_html(quality)
+    findings = "".join(f"<li>{html.escape(str(f.message))} <i>{html.escape(str(f.advice))}</i></li>"
+                       for f in getattr(quality, "findings", []))
+    colour = {"good": render.GREEN, "bad": render.RED}.get(str(quality.verdict), "#b7791f")
+    return (f'<span class="dtscal-verdict" style="color:{colour}"><b>{html.escape(str(quality.verdict))}</b></span>'
+            + (f"<ul>{findings}</ul>" if findings else ""))
+
+
+class LiveCalibrator:
+    """Live intrinsic calibration of a camera source in JupyterLab.
+
+    Parameters
+    ----------
+    source : str or live source
+        ``"ros:ROBOT"`` (a Duckiebot over ROS), ``"device:0"``, a stream URL, or a recording
+        (a ROS 1 bag), or an already opened live source.
+    board : the calibration board (default Duckietown's 7x5 inner corners, 31 mm)
+    robot : robot name for the files (default: from the source)
+    calibration_dir : folder that receives ``camera_intrinsic/<ROBOT>.yaml`` on an offline COMMIT
+    model : ``"plumb_bob"`` (ROS default) or ``"radial2"``
+    realtime, loop : recordings: play at the recorded rate (or as fast as possible); replay at the end
+    autostart : start the frame loop at once
+    """
+
+    def __init__(self, source, *, board: Board = DUCKIETOWN_BOARD, robot: str | None = None,
+                 calibration_dir="calibrations", model: str = "plumb_bob", realtime: bool = True,
+                 loop: bool = False, autostart: bool = True):
+        import ipywidgets as w
+
+        self.board = board
+        self.model = model
+        self.spec = str(getattr(source, "spec", source))
+        self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
+        self.robot = robot or robot_of(self.spec, self.source) or "camera"
+        self.tracker: CoverageTracker | None = None
+        self.thumbs: list[bytes] = []
+        self.result = None
+        self.quality = None
+        self.dropped: list[int] = []
+        self.bad: Counter = Counter()
+        self.frames_seen = 0
+        self.last_frame = None
+        self.state = "connecting"
+        self.calibrating = False
+        self.calibrate_error: str | None = None
+        self.calibrate_seconds = float("nan")
+        self._lock = threading.RLock()
+        self._job: threading.Thread | None = None
+        self._preview_maps = None
+        self._preview_key = None
+        # CALIBRATE runs in a helper process (see solver.py: in a thread, it would stall the image)
+        self._solver: SolverProcess | None = None
+
+        # ---- widgets
+        lay = w.Layout
+        self.status = w.HTML(render.message_html(f"connecting to {self.spec} ..."))
+        self.image = w.Image(format="jpeg", layout=lay(width="640px"))
+        self.bars = w.HTML(render.bars_html(CoverageTracker(board).bars()))
+        self.count = w.HTML("samples: 0")
+        self.thumb_box = w.HBox([], layout=lay(overflow="auto", width="660px", min_height="96px"))
+        self.calibrate_button = w.Button(description="CALIBRATE", disabled=True, button_style="primary",
+                                         tooltip="enabled when every bar is green or at 40 samples")
+        self.commit_button = w.Button(description="COMMIT", disabled=True, button_style="success")
+        self.save_button = w.Button(description="SAVE", disabled=False)
+        self.reconnect_button = w.Button(description="RECONNECT", icon="refresh")
+        ros = self.spec.startswith("ros:")
+        self.commit_target = w.Dropdown(options=[("robot over ROS (set_camera_info)", "ros"),
+                                                 ("calibration folder", "folder")],
+                                        value="ros" if ros else "folder", description="commit to")
+        self.robot_text = w.Text(value=self.robot, description="robot")
+        self.folder_text = w.Text(value=str(calibration_dir), description="folder",
+                                  layout=lay(width="420px"))
+        self.archive_text = w.Text(value=f"{self.robot}_session.zip", description="archive",
+                                   layout=lay(width="420px"))
+        self.message = w.HTML("")
+        self.results = w.HTML(render.message_html("no calibration yet: fill the bars, then CALIBRATE"))
+        self.preview = w.Image(format="jpeg", layout=lay(width="640px"))
+        self.alpha = w.FloatSlider(value=0.0, min=0.0, max=1.0, step=0.05, description="alpha",
+                                   continuous_update=False)
+        for b, fn in ((self.calibrate_button, self.calibrate), (self.commit_button, self.commit),
+                      (self.save_button, self.save), (self.reconnect_button, self.reconnect)):
+            b.on_click(lambda _b, fn=fn: fn())
+        self.robot_text.observe(lambda ch: setattr(self, "robot", ch["new"].strip()), "value")
+        self.widget = w.VBox([
+            self.status, self.image,
+            w.HBox([w.VBox([self.bars, self.count], layout=lay(width="330px")),
+                    w.VBox([w.HBox([self.calibrate_button, self.commit_button, self.save_button,
+                                    self.reconnect_button]), self.commit_target, self.robot_text])]),
+            w.HTML("<b>samples kept</b> (click a sample's button to drop it)"), self.thumb_box,
+            self.folder_text, self.archive_text, self.message,
+            w.HTML("<b>results</b>"), self.results,
+            w.HTML("<b>undistorted live preview</b> (after CALIBRATE; alpha 0 crops to valid pixels, 1 keeps all)"),
+            self.alpha, self.preview,
+        ])
+        self.loop = FrameLoop(self.source, self._on_frame, self._on_status)
+        if autostart:
+            self.loop.start()
+
+    # ------------------------------------------------------------------ display
+    def _repr_mimebundle_(self, **kw):
+        bundle = self.widget._repr_mimebundle_(**kw)
+        # the widget's own text form changes with every frame; this one is stable (stored outputs)
+        bundle["text/plain"] = "live calibrator (shown as a widget in JupyterLab)"
+        return bundle
+
+    # ------------------------------------------------------------------ frame loop
+    def _on_status(self, st) -> None:
+        self.state = st.state
+        bad = ", ".join(f"{k} {v}" for k, v in sorted({**st.bad, **self.bad}.items()))
+        text = {"connecting": f"connecting to {self.spec} ...",
+                "running": f"live: {self.spec}",
+                "ended": f"source ended: {st.message}. Every sample is kept; RECONNECT to go on.",
+                "error": f"source lost: {st.message}. Every sample is kept; RECONNECT when it is back."}.get(
+            st.state, st.message)
+        if bad:
+            text += f" (skipped frames: {bad})"
+        self.status.value = render.message_html(text, "error" if st.state in ("ended", "error") else "info")
+
+    def _on_frame(self, frame) -> bool | None:
+        """The loop body: detect, offer to coverage, draw, encode, publish (False: frame skipped)."""
+        arrival = getattr(frame, "arrival", None) or time.time()
+        img = frame.image
+        if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
+            return self._skip("odd_frame")
+        size = (img.shape[1], img.shape[0])
+        with self._lock:
+            if self.tracker is None:
+                self.tracker = CoverageTracker(self.board, size)
+            if size != self.tracker.image_size:
+                return self._skip("size_mismatch")
+            try:
+                det = detect_board(img, self.board)
+            except (DtscalError, cv2.error):
+                return self._skip("detector_error")
+            added = self.tracker.offer(det, frame.index) if det.found else False
+            if added:
+                self.thumbs.append(render.thumbnail(img, det.corners))
+            n = len(self.tracker.samples)
+            ready = self.tracker.ready()
+            bars = self.tracker.bars() if added else None
+        if added and n >= MIN_SAMPLES:
+            self.prepare_calibration()
+        self.frames_seen += 1
+        self.last_frame = img
+        drawn = draw_detection(img, det)
+        jpeg = render.encode_jpeg(drawn)
+        with self.image.hold_sync():
+            self.image.value = jpeg
+            self.image._dom_classes = render.stamp_classes(frame.index, arrival)
+        if added:
+            self.bars.value = render.bars_html(bars)
+            self.count.value = f"samples: {n}"
+            self._add_thumb(n - 1)
+        enable = ready and not self.calibrating and n >= MIN_SAMPLES
+        if self.calibrate_button.disabled == enable:
+            self.calibrate_button.disabled = not enable
+        if self.result is not None:
+            self._show_preview(img)
+
+    def _skip(self, reason: str) -> bool:
+        """Count a frame the calibrator cannot use (the count shows under the bars); returns False."""
+        self.bad[reason] += 1
+        n = len(self.tracker.samples) if self.tracker else 0
+        self.count.value = f"samples: {n}; frames skipped: " + ", ".join(
+            f"{k} {v}" for k, v in sorted(self.bad.items()))
+        return False
+
+    def _add_thumb(self, i: int) -> None:
+        import ipywidgets as w
+
+        im = w.Image(value=self.thumbs[i], format="jpeg", layout=w.Layout(width="96px"))
+        b = w.Button(description=f"drop {i + 1}", layout=w.Layout(width="96px"), tooltip="drop this sample")
+        box = w.VBox([im, b], layout=w.Layout(min_width="100px", flex="0 0 auto"))
+        b.on_click(lambda _b, box=box: self.drop_sample(list(self.thumb_box.children).index(box)))
+        self.thumb_box.children = (*self.thumb_box.children, box)
+
+    def _rebuild_thumbs(self) -> None:
+        old, self.thumb_box.children = self.thumb_box.children, ()
+        for box in old:  # close the widgets too, or the kernel keeps their models
+            for child in box.children:
+                child.close()
+            box.close()
+        for i in range(len(self.thumbs)):
+            self._add_thumb(i)
+
+    def _show_preview(self, img) -> None:
+        cam = self.camera()
+        key = (id(self.result), round(float(self.alpha.value), 3))
+        if key != self._preview_key:
+            self._preview_maps = cam.with_alpha(float(self.alpha.value)).rectification_maps()
+            self._preview_key = key
+        out = cv2.remap(img, self._preview_maps[0], self._preview_maps[1], cv2.INTER_LINEAR)
+        self.preview.value = render.encode_jpeg(out)
+
+    # ------------------------------------------------------------------ actions
+    @property
+    def samples(self):
+        return [] if self.tracker is None else list(self.tracker.samples)
+
+    def drop_sample(self, i: int) -> None:
+        """Forget sample ``i`` (0-based): its thumbnail goes, the bars are recomputed."""
+        with self._lock:
+            if self.tracker is None or not 0 <= i < len(self.tracker.samples):
+                return
+            del self.tracker.samples[i]
+            del self.thumbs[i]
+            bars, n, ready = self.tracker.bars(), len(self.tracker.samples), self.tracker.ready()
+        self.bars.value = render.bars_html(bars)
+        self.count.value = f"samples: {n}"
+        self._rebuild_thumbs()
+        self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES) or self.calibrating
+
+    def calibrate(self, wait: bool = False):
+        """Calibrate from the samples in a background thread; ``wait=True`` blocks until done.
+
+        Returns the ``CalibrationResult`` (``wait=True``) or the thread. A failure (too few or
+        degenerate samples) is shown in the results panel; the previous calibration stays.
+        """
+        with self._lock:
+            if self.calibrating:
+                job = self._job
+            else:
+                obj, img = self.tracker.object_and_image_points() if self.tracker else ([], [])
+                size = self.tracker.image_size if self.tracker else None
+                self.calibrating = True
+                self.calibrate_button.disabled = True
+                self.results.value = render.message_html(f"calibrating from {len(obj)} samples ...")
+                job = threading.Thread(target=self._calibrate_job, args=(obj, img, size), daemon=True,
+                                       name="dtscal-calibrate")
+                self._job = job
+                job.start()
+        if wait:
+            job.join()
+            return self.result
+        return job
+
+    def prepare_calibration(self, wait: float = 0.0) -> bool:
+        """Start the calibration process ahead of CALIBRATE (done by itself at 3 samples).
+
+        Returns True when it is ready (waiting up to ``wait`` seconds).
+        """
+        if self._solver is None or not self._solver.alive:
+            try:
+                self._solver = SolverProcess()
+            except OSError:  # no subprocesses here: CALIBRATE runs in a thread of this process
+                self._solver = None
+                return False
+        return self._solver.ready(wait)
+
+    def _solve(self, obj, img, size):
+        """``calibrate_without_outlier_views`` in the calibration process (in this one if that fails)."""
+        if self.prepare_calibration():
+            try:
+                return self._solver.calibrate(obj, img, size, self.model)
+            except (OSError, EOFError):
+                self._solver = None
+        return calibrate_without_outlier_views(obj, img, size, model=self.model)
+
+    def _assess(self, result):
+        """The verdict (after the result is shown: it can take longer than the calibration)."""
+        if getattr(result, "quality", None) is None:
+            return None
+        if self._solver is not None:
+            try:
+                return self._solver.assess(result)
+            except (OSError, EOFError, DtscalError):
+                pass
+        return assess_quality(result)
+
+    def _calibrate_job(self, obj, img, size) -> None:
+        t0 = time.perf_counter()
+        try:
+            if len(obj) < MIN_SAMPLES:
+                raise DtscalError(f"only {len(obj)} sample(s); calibration needs at least {MIN_SAMPLES} views "
+                                  "of the board at different positions and tilts")
+            result, dropped = self._solve(obj, img, size)
+            if not np.all(np.isfinite(result.K)):
+                raise DtscalError("the calibration did not converge; collect more varied samples")
+        except DtscalError as exc:
+            self.calibrate_error = str(exc)
+            keep = " The previous calibration is kept." if self.result is not None else ""
+            self.results.value = render.message_html(f"CALIBRATE failed: {exc}.{keep}", "error")
+        except Exception as exc:  # numerical breakdown: a message, never a traceback
+            self.calibrate_error = f"{type(exc).__name__}: {exc}"
+            self.results.value = render.message_html(
+                f"CALIBRATE failed ({self.calibrate_error}); collect more varied samples and try again", "error")
+        else:
+            self.calibrate_error = None
+            with self._lock:
+                self.result, self.dropped, self.quality = result, dropped, None
+            self.results.value = render.calibration_html(result, dropped, len(obj))
+            self.commit_button.disabled = False
+            self._preview_key = None
+        finally:
+            self.calibrate_seconds = time.perf_counter() - t0
+        try:
+            if self.calibrate_error is None:  # the verdict follows; it can take longer than the calibration
+                quality = self._assess(result)
+                verdict = verdict_html(quality)
+                with self._lock:
+                    current = self.result is result
+                    if current:
+                        self.quality = quality
+                if verdict and current:
+                    self.results.value = render.calibration_html(result, dropped, len(obj), verdict)
+        finally:
+            with self._lock:
+                self.calibrating = False
+                ready = self.tracker is not None and self.tracker.ready()
+                n = len(self.tracker.samples) if self.tracker else 0
+            self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES)
+
+    def camera(self) -> CameraModel | None:
+        """The calibrated camera (``P`` with alpha 0, as ROS sets it), or None before CALIBRATE."""
+        return None if self.result is None else self.result.camera()
+
+    def calibration(self) -> calib_files.IntrinsicCalibration | None:
+        cam = self.camera()
+        if cam is None:
+            return None
+        return calib_files.IntrinsicCalibration.from_camera(cam, camera_name=f"/{self.robot}/camera_node")
+
+    def _say(self, text: str, kind: str = "info") -> str:
+        self.message.value = render.message_html(text, kind)
+        return text
+
+    def commit(self) -> str:
+        """Write ``camera_intrinsic/<ROBOT>.yaml`` into the calibration folder and, with the
+        target "robot over ROS", send it to ``/<ROBOT>/camera_node/set_camera_info``.
+
+        On failure the message says why; the previous file on the robot or in the folder
+        is unchanged, and SAVE still keeps the new calibration.
+        """
+        calib = self.calibration()
+        if calib is None:
+            return self._say("nothing to commit yet: CALIBRATE first", "error")
+        try:
+            robot = calib_files.check_robot_name(self.robot)
+            path = calib_files.save_intrinsics(calib, self.folder_text.value.strip(), robot)
+            if self.commit_target.value == "folder":
+                return self._say(f"COMMIT: wrote {path} (the previous file, if any, is kept as .bak)", "ok")
+            from ..robot import commit_intrinsics
+
+            answer = commit_intrinsics(robot, path, master_uri=getattr(self.source, "master", None))
+            return self._say(f"COMMIT to {robot}: {answer} (local copy: {path})", "ok")
+        except (DtscalError, OSError) as exc:
+            return self._say(f"COMMIT failed: {exc}. The previous calibration is unchanged; "
+                             "SAVE still keeps this one.", "error")
+
+    def save(self, path=None) -> str:
+        """Write the samples (and the calibration, if any) into one zip archive."""
+        path = Path(path or self.archive_text.value.strip() or f"{self.robot}_session.zip")
+        if self.tracker is None:
+            return self._say("nothing to save yet: no frame has arrived", "error")
+        with self._lock:
+            samples = list(self.tracker.samples)
+        try:
+            out = save_session(path, board=self.board, image_size=self.tracker.image_size, robot=self.robot,
+                               samples=samples, calibration=self.calibration())
+        except DtscalError as exc:
+            return self._say(f"SAVE failed: {exc}", "error")
+        return self._say(f"SAVE: {len(samples)} samples" + (" and the calibration" if self.result else "")
+                         + f" in {out}", "ok")
+
+    def load(self, path) -> str:
+        """Replace the samples by those of a SAVE archive (CALIBRATE again to recalibrate)."""
+        try:
+            arch = load_session(path)
+        except DtscalError as exc:
+            return self._say(f"LOAD failed: {exc}", "error")
+        if arch.board != self.board:
+            return self._say(f"LOAD failed: the archive is for a {arch.board.describe()} board, this "
+                             f"calibrator uses {self.board.describe()}", "error")
+        with self._lock:
+            if self.tracker is None or self.tracker.image_size != arch.image_size:
+                self.tracker = CoverageTracker(self.board, arch.image_size)
+            self.tracker.samples = list(arch.samples)
+            self.thumbs = [_outline_thumb(s.corners, arch.image_size) for s in arch.samples]
+            bars, n, ready = self.tracker.bars(), len(arch.samples), self.tracker.ready()
+        self.bars.value = render.bars_html(bars)
+        self.count.value = f"samples: {n}"
+        self._rebuild_thumbs()
+        self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES)
+        return self._say(f"loaded {n} samples from {path}; CALIBRATE to recalibrate", "ok")
+
+    def reconnect(self) -> str:
+        """Re-open the source; samples and calibration are kept."""
+        try:
+            self.loop.reconnect()
+        except DtscalError as exc:
+            return self._say(f"RECONNECT failed: {exc}", "error")
+        return self._say(f"reconnecting to {self.spec}; {len(self.samples)} samples kept")
+
+    def close(self) -> None:
+        """Stop the frame loop, close the source and end the calibration process."""
+        self.loop.close()
+        if self._solver is not None:
+            self._solver.close()
+            self._solver = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _outline_thumb(corners: np.ndarray, size, width: int = 96) -> bytes:
+    """Thumbnail of a loaded sample (the frame is not saved): the board outline on grey."""
+    blank = np.full((size[1], size[0], 3), 200, np.uint8)
+    return render.thumbnail(blank, corners, width)
