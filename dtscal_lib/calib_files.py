@@ -14,7 +14,8 @@ Beside each ``<ROBOT>.yaml`` sits the factory ``default.yaml``, which the robot 
 back to and which is never overwritten (:func:`write_defaults` only creates it when it
 is missing).
 
-Reading uses ``yaml.safe_load`` only: a file with a Python tag
+Reading uses ``yaml``'s safe loader only, with limits (:mod:`dtscal_lib.safe_yaml`: file
+size, alias expansion, number length, duplicate keys): a file with a Python tag
 (``!!python/object/apply:...``) is refused, nothing in it runs. Every value is checked
 (finite numbers, matrix sizes, a plausible ``K``, a rotation ``R``, a ``P`` of the form
 ``[K' | t]``, a non-singular, non-corrupt homography) and every error names the file and
@@ -53,6 +54,7 @@ import numpy as np
 import yaml
 
 from . import duckietown as dt
+from . import safe_yaml
 from .camera import CameraModel, as_dist
 from .errors import CalibrationFileError, DtscalError
 
@@ -133,6 +135,8 @@ def extrinsic_path(out_dir, robot: str) -> Path:
 
 # --------------------------------------------------------------------------- field validation
 def _fail(where: str, msg: str) -> CalibrationFileError:
+    if len(msg) > 600:  # a hostile value must not make an unreadable (or huge) message
+        msg = f"{msg[:450]} … {msg[-120:]}"
     return CalibrationFileError(f"{where}: {msg}")
 
 
@@ -392,27 +396,21 @@ def _read_yaml(path) -> tuple[Any, str]:
     if not p.exists():
         raise _fail(where, "file not found; check the robot name and the calibrations folder "
                            "(it holds camera_intrinsic/ and camera_extrinsic/)")
-    if not p.is_file():
-        raise _fail(where, "is not a file")
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise _fail(where, f"cannot be read ({e})") from e
-    try:
-        doc = yaml.safe_load(text)
+    try:  # bounded: file size, alias expansion, number lengths, duplicate keys (see safe_yaml)
+        doc = safe_yaml.load_yaml_file(p, where)
     except yaml.constructor.ConstructorError as e:
         problem = getattr(e, "problem", "") or ""
         if "constructor for the tag" not in problem:
             raise _fail(where, f"is not valid calibration YAML: {problem}; fix the file or restore it "
                                "from default.yaml") from None
-        tag = problem.split("tag", 1)[1].strip()
+        tag = safe_yaml.shorten(problem.split("tag", 1)[1].strip(), 80)
         raise _fail(where, f"contains a non-data tag ({tag}) and was not loaded (nothing in it was run); "
                            "a calibration file holds only numbers, strings, lists and mappings. Do not use "
                            "this file: restore it from default.yaml or recalibrate") from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        problem = safe_yaml.shorten(getattr(e, "problem", None) or str(e).splitlines()[0], 200)
         raise _fail(where, f"is not valid YAML{at}: {problem}; fix the file or restore it "
                            "from default.yaml") from None
     if doc is None:

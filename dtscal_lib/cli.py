@@ -84,11 +84,13 @@ def _master(args) -> None:
 def cmd_calibrate_intrinsics(args) -> int:
     from .pipeline import calibrate_intrinsics
 
+    from .pipeline import parse_image_size
+
     _master(args)
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
                                progress=_progress(not args.quiet, "frames"), keep_anyway=args.keep_anyway,
-                               max_seconds=args.max_seconds)
+                               max_seconds=args.max_seconds, image_size=parse_image_size(args.image_size))
     from .report import quality_for_run  # verdict; warnings on stderr; figures + index.html with --report
 
     quality = quality_for_run(run, args.report)
@@ -278,6 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
     common(sp)
     sp.add_argument("--model", choices=["plumb_bob", "radial2"], default="plumb_bob")
     sp.add_argument("--skew", action="store_true", help="also estimate the skew of K (own refinement)")
+    sp.add_argument("--image-size", metavar="WxH",
+                    help="size of the frames to calibrate (default: the size in which the board is found most)")
     sp.add_argument("--report", metavar="DIR", help="write figures and DIR/index.html on how good the calibration is")
     sp.set_defaults(func=cmd_calibrate_intrinsics)
 

@@ -26,10 +26,10 @@ import os
 from pathlib import Path
 from typing import Iterator
 
-import cv2
 import numpy as np
 
-from .errors import DtscalError, FrameError, SourceError
+from .errors import DtscalError, FrameError, Reason, SourceError
+from .sources.bag import BagSource
 
 ENV_VAR = "DTSCAL_DATA"
 TRUTH_FILE = "truth.yaml"
@@ -132,36 +132,34 @@ def load_truth() -> dict:
 
 
 def read_bag_jpegs(path: Path, topic: str | None = None) -> Iterator[tuple[int, int, bytes]]:
-    """``(index, stamp_ns, jpeg bytes)`` of every ``CompressedImage`` in a ROS 1 bag, in time order.
+    """``(index, stamp_ns, jpeg bytes)`` of every ``CompressedImage`` in a ROS 1 bag, in file order.
 
-    ``index`` counts the messages of the topic from 0. ``topic`` defaults to the only
-    ``sensor_msgs/CompressedImage`` topic of the bag.
+    ``index`` counts the messages of the topic from 0; ``stamp_ns`` is the header stamp.
+    ``topic`` defaults to the bag's camera topic. Read by the kit's one bag reader,
+    :class:`~dtscal_lib.sources.BagSource` (bounded, tolerant of damage).
     """
-    from rosbags.rosbag1 import Reader
-    from rosbags.typesys import Stores, get_typestore
-
     path = Path(path)
     if not path.is_file():
         raise SourceError(f"bag {path} does not exist; {_REGENERATE}")
-    store = get_typestore(Stores.ROS1_NOETIC)
-    with Reader(path) as reader:
-        conns = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/CompressedImage"
-                 and (topic is None or c.topic == topic)]
-        if not conns:
-            raise SourceError(f"bag {path} has no sensor_msgs/CompressedImage messages"
-                              + (f" on {topic}" if topic else ""))
-        for i, (conn, _t, raw) in enumerate(reader.messages(connections=conns)):
-            msg = store.deserialize_ros1(raw, conn.msgtype)
-            stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
-            yield i, stamp, bytes(msg.data)
+    yield from BagSource(path, topic=topic).compressed_images()
 
 
-def _decode(data: bytes, index: int) -> np.ndarray:
-    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
-    if img is None:
-        raise FrameError("corrupt_jpeg", f"frame {index} of the bundled recording could not be decoded; "
-                         f"{_REGENERATE}")
-    return img
+def _session_frames(name: str, step: int = 1, limit: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """Decoded frames of a bundled bag, through the kit's one guarded decode path."""
+    path = session_dir() / name
+    if not path.is_file():
+        raise SourceError(f"bag {path} does not exist; {_REGENERATE}")
+    n = 0
+    for frame in BagSource(path):
+        if limit is not None and n >= limit:
+            return
+        if frame.index % step:
+            continue
+        if not frame.ok:
+            raise FrameError(getattr(frame.error, "reason", Reason.UNREADABLE),
+                             f"frame {frame.index} of the bundled {name} cannot be used ({frame.error}); {_REGENERATE}")
+        yield frame.index, frame.image
+        n += 1
 
 
 def intrinsic_frames(step: int = 1, limit: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
@@ -176,16 +174,9 @@ def intrinsic_frames(step: int = 1, limit: int | None = None) -> Iterator[tuple[
         raise DtscalError(f"step must be a positive integer, got {step}")
     if limit is not None and int(limit) < 0:
         raise DtscalError(f"limit must be >= 0 or None, got {limit}")
-    n = 0
-    for index, _stamp, data in read_bag_jpegs(session_dir() / INTRINSICS_BAG):
-        if limit is not None and n >= limit:
-            return
-        if index % int(step):
-            continue
-        yield index, _decode(data, index)
-        n += 1
+    yield from _session_frames(INTRINSICS_BAG, int(step), limit)
 
 
 def extrinsic_frames() -> list[np.ndarray]:
     """The frames of the extrinsic capture (robot standing, board on the ground), BGR uint8."""
-    return [_decode(data, i) for i, _s, data in read_bag_jpegs(session_dir() / EXTRINSICS_BAG)]
+    return [image for _index, image in _session_frames(EXTRINSICS_BAG)]

@@ -57,7 +57,7 @@ from scipy.spatial import cKDTree
 
 from .boards import DUCKIETOWN_BOARD, Board
 from .duckietown import BORDER_MARGIN_PX
-from .errors import DtscalError, FrameError
+from .errors import DtscalError, FrameError, Reason
 
 #: OpenCV flags of ROS's calibrator (``FAST_CHECK`` is what the live calibrator adds)
 ROS_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
@@ -75,8 +75,8 @@ UPSCALE_REGION_SIDE = 240
 #: pieces of a split board are merged if they come within this many saddle spacings of the seed
 MERGE_REACH = 3.0
 
-REASON_NO_BOARD = "no_board"
-REASON_AT_BORDER = "at_border"
+REASON_NO_BOARD = Reason.NO_BOARD
+REASON_AT_BORDER = Reason.AT_BORDER
 
 
 @dataclass(frozen=True)
@@ -129,15 +129,15 @@ def to_gray(image) -> np.ndarray:
         ``"bad_dtype"`` for unsupported pixel types, ``"bad_values"`` for NaN/inf pixels.
     """
     if image is None:
-        raise FrameError("empty", "the frame is None; the source returned no image (check the camera/bag)")
+        raise FrameError(Reason.EMPTY, "the frame is None; the source returned no image (check the camera/bag)")
     img = np.asarray(image)
     if img.size == 0:
-        raise FrameError("empty", f"the frame is empty (shape {img.shape}); skip it and read the next one")
+        raise FrameError(Reason.EMPTY, f"the frame is empty (shape {img.shape}); skip it and read the next one")
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[:, :, 0]
     if not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] in (3, 4))):
         raise FrameError(
-            "bad_shape",
+            Reason.BAD_SHAPE,
             f"expected a gray (h, w), BGR (h, w, 3) or BGRA (h, w, 4) image, got shape {img.shape}; "
             "decode the frame to an image first",
         )
@@ -157,11 +157,11 @@ def _to_uint8(img: np.ndarray) -> np.ndarray:
         return ((img.astype(np.uint32) + 128) // 257).astype(np.uint8)
     if np.issubdtype(img.dtype, np.floating):
         if not np.all(np.isfinite(img)):
-            raise FrameError("bad_values", "the frame contains NaN or infinite pixels; it cannot be used")
+            raise FrameError(Reason.BAD_VALUES, "the frame contains NaN or infinite pixels; it cannot be used")
         scale = 255.0 if float(img.max()) <= 1.0 else 1.0
         return np.clip(np.rint(img * scale), 0, 255).astype(np.uint8)
     raise FrameError(
-        "bad_dtype",
+        Reason.BAD_DTYPE,
         f"unsupported pixel type {img.dtype}; give uint8, uint16 or float images (e.g. img.astype(np.uint8))",
     )
 
@@ -176,7 +176,7 @@ def _as_bgr(image) -> np.ndarray:
         return cv2.cvtColor(_to_uint8(img), cv2.COLOR_BGRA2BGR)
     if img.ndim == 3 and img.shape[2] == 3:
         return _to_uint8(img).copy()
-    raise FrameError("bad_shape", f"cannot draw on an image of shape {img.shape}")
+    raise FrameError(Reason.BAD_SHAPE, f"cannot draw on an image of shape {img.shape}")
 
 
 # --------------------------------------------------------------------------- step 1: saddles

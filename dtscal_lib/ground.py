@@ -36,7 +36,7 @@ import numpy as np
 from . import duckietown as dt
 from .boards import DUCKIETOWN_BOARD, GROUND_NEAR_ROW_X, Board, ground_points, order_for_ground
 from .camera import CameraModel, as_points, rectify_image
-from .errors import CalibrationError, DtscalError
+from .errors import CalibrationError, DtscalError, Reason
 from .detect import detect_board_still
 from .homography import apply_homography, as_homography, invert_homography
 
@@ -100,12 +100,13 @@ def estimate_ground_homography(pixels, ground, *, method: str | int = "ransac",
     if H is None or not np.all(np.isfinite(H)) or abs(H[2, 2]) < 1e-12:
         raise CalibrationError(
             "no homography fits these points (are they collinear, or all in one spot?); the board's "
-            "corners must span an area of the image"
+            "corners must span an area of the image", reason=Reason.HOMOGRAPHY_FAILED,
         )
     H = H / H[2, 2]
     sv = np.linalg.svd(H, compute_uv=False)
     if sv[-1] / sv[0] < 1e-14:
-        raise CalibrationError("the fitted homography is singular: the points are degenerate (collinear)")
+        raise CalibrationError("the fitted homography is singular: the points are degenerate (collinear)",
+                               reason=Reason.HOMOGRAPHY_FAILED)
     return H
 
 
@@ -173,11 +174,13 @@ class ExtrinsicResult:
 
 def _check_image(image) -> np.ndarray:
     if not isinstance(image, np.ndarray) or image.size == 0:
-        raise CalibrationError("expected a non-empty image array (H x W or H x W x 3)")
+        raise CalibrationError("expected a non-empty image array (H x W or H x W x 3)", reason=Reason.EMPTY)
     if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
-        raise CalibrationError(f"expected a grey or colour image, got an array of shape {image.shape}")
+        raise CalibrationError(f"expected a grey or colour image, got an array of shape {image.shape}",
+                               reason=Reason.BAD_SHAPE)
     if image.dtype != np.uint8:
-        raise CalibrationError(f"expected an 8-bit image (uint8), got {image.dtype}; convert it first")
+        raise CalibrationError(f"expected an 8-bit image (uint8), got {image.dtype}; convert it first",
+                               reason=Reason.BAD_DTYPE)
     return image
 
 
@@ -238,33 +241,34 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
         raise CalibrationError(
             f"the frame is {image.shape[1]}x{image.shape[0]}, which resized to width {cw} is "
             f"{frame.shape[1]}x{frame.shape[0]}, but the camera was calibrated at {cw}x{ch}; "
-            "use frames from the calibrated camera mode"
+            "use frames from the calibrated camera mode", reason=Reason.SIZE_MISMATCH,
         )
     rectified = rectify_image(frame, camera.rectification_maps())
     corners, reason = _find_corners(rectified, board)
-    if reason == "at_border":
+    if reason == Reason.AT_BORDER:
         raise CalibrationError(
             f"the board ({board.describe()}) was found but some corners are within {dt.BORDER_MARGIN_PX} px "
             "of the rectified image's edge; place the robot on the board as instructed, centred, so that "
-            "the whole board is well inside the view"
+            "the whole board is well inside the view", reason=Reason.AT_BORDER,
         )
     if corners is None:
         raise CalibrationError(
             f"the board ({board.describe()}) was not found in the rectified image; place the robot on the "
             "board as instructed (the board flat in front of the robot, fully in view, its long side across "
             f"the view, the near row of inner corners {GROUND_NEAR_ROW_X} m ahead of the wheel axle), "
-            "with even lighting and no glare"
+            "with even lighting and no glare", reason=Reason.NO_BOARD,
         )
     try:
         ordered = order_for_ground(corners, board)
     except DtscalError as e:
-        raise CalibrationError(str(e)) from e
+        raise CalibrationError(str(e), reason=Reason.BOARD_ORDER) from e
     ground = ground_points(board)
     H = estimate_ground_homography(ordered, ground, method=method)
     if dt.homography_is_corrupt(H):
         raise CalibrationError(
             f"the fitted homography has H[1][2] = {H[1, 2]:g} > 0, which Duckietown rejects as corrupt "
-            "(the board looks mirrored or rotated); place the board as instructed and try again"
+            "(the board looks mirrored or rotated); place the board as instructed and try again",
+            reason=Reason.CORRUPT_HOMOGRAPHY,
         )
     residual_mm = 1000.0 * np.linalg.norm(pixel_to_ground(H, ordered) - ground, axis=1)
     centre = np.array([[(cw - 1) / 2.0, (ch - 1) / 2.0]])
@@ -272,7 +276,7 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
         centre_ground = pixel_to_ground(H, centre)[0]
     except DtscalError:
         raise CalibrationError("the image centre lies on the horizon of the fitted homography; "
-                               "the camera must look down at the ground") from None
+                               "the camera must look down at the ground", reason=Reason.HORIZON) from None
     return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground)
 
 

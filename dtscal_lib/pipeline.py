@@ -21,11 +21,13 @@ import numpy as np
 from . import calib_files
 from .boards import DUCKIETOWN_BOARD, Board
 from .calibration import CalibrationResult, calibrate
+from .camera import as_size
 from .coverage import CoverageTracker
 from .detect import detect_board
-from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError
+from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError, Reason, opencv_message
 from .plausibility import intrinsic_doubts
 from .sources import Frame, open_source
+from .sources.headers import MAX_PIXELS, MAX_SIDE
 from .validation import check_board, check_image_size, check_output_folder
 
 #: fewer samples than this cannot give a trustworthy calibration
@@ -81,29 +83,97 @@ class FrameTally:
         return {"total": self.total, "used": self.used, "rejected": dict(sorted(self.rejected.items()))}
 
 
-def usable_images(frames: Iterable[Frame], tally: FrameTally):
-    """Yield ``(frame, image)`` for frames that decode to an image of a consistent size.
+def usable_images(frames: Iterable[Frame], tally: FrameTally, size: tuple[int, int] | None = None):
+    """Yield ``(frame, image)`` for frames that decode to an image (of ``size`` when given).
 
-    The first good frame fixes the size; frames of another size are counted as
-    ``size_mismatch``, undecodable frames under their own reason.
+    Undecodable frames are counted under their own reason; with ``size`` given, frames of
+    another size are counted as ``size_mismatch``. No frame fixes the size for the others:
+    which size a calibration uses is decided from the frames that show the board
+    (:class:`SizeGroups`).
     """
-    size = None
     for frame in frames:
         tally.total += 1
         if frame.error is not None or frame.image is None:
-            tally.reject(getattr(frame.error, "reason", None) or "unreadable")
+            tally.reject(getattr(frame.error, "reason", None) or Reason.UNREADABLE)
             continue
         img = frame.image
         if img.ndim < 2 or img.size == 0:
-            tally.reject("empty")
+            tally.reject(Reason.EMPTY)
             continue
-        this = (int(img.shape[1]), int(img.shape[0]))
-        if size is None:
-            size = this
-        elif this != size:
-            tally.reject("size_mismatch")
+        if size is not None and (int(img.shape[1]), int(img.shape[0])) != tuple(size):
+            tally.reject(Reason.SIZE_MISMATCH)
             continue
         yield frame, img
+
+
+def parse_image_size(text: str | None) -> tuple[int, int] | None:
+    """``"640x480"`` -> ``(640, 480)``; None stays None. Sizes beyond the decoding limit are refused.
+
+    >>> parse_image_size("640x480")
+    (640, 480)
+    """
+    if text is None:
+        return None
+    m = re.fullmatch(r"\s*(\d{1,6})\s*[xX]\s*(\d{1,6})\s*", str(text))
+    if not m or min(int(m.group(1)), int(m.group(2))) < 1:
+        raise DtscalError(f"--image-size must be WIDTHxHEIGHT in pixels, e.g. 640x480; got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if w > MAX_SIDE or h > MAX_SIDE or w * h > MAX_PIXELS:
+        raise DtscalError(f"--image-size {w}x{h} is beyond the kit's limit of {MAX_SIDE} px a side and "
+                          f"{MAX_PIXELS // 1_000_000} Mpx")
+    return w, h
+
+
+@dataclass
+class _SizeGroup:
+    tracker: CoverageTracker
+    tally: FrameTally = field(default_factory=FrameTally)
+    found: int = 0
+    obj: list = field(default_factory=list)
+    img: list = field(default_factory=list)
+
+
+class SizeGroups:
+    """Detections kept per image size until the calibration's size is known.
+
+    A 1x1 thumbnail that sorts first must not decide the size of a calibration: each size
+    gets its own coverage tracker and tally, and :meth:`resolve` picks the size in which the
+    board was found most often (or the given one); every frame of another size is then
+    counted as ``size_mismatch``.
+    """
+
+    def __init__(self, board: Board, image_size: tuple[int, int] | None = None):
+        self.board = board
+        self.image_size = None if image_size is None else as_size(image_size, name="image_size")
+        self.groups: dict[tuple[int, int], _SizeGroup] = {}
+
+    def ready(self) -> bool:
+        """True once some size's coverage enables CALIBRATE (a live camera stops collecting then)."""
+        return any(g.tracker.ready() for g in self.groups.values())
+
+    def group(self, img: np.ndarray) -> _SizeGroup:
+        size = (int(img.shape[1]), int(img.shape[0]))
+        if size not in self.groups:
+            self.groups[size] = _SizeGroup(CoverageTracker(self.board, size))
+        return self.groups[size]
+
+    def resolve(self, tally: FrameTally) -> tuple[tuple[int, int], _SizeGroup] | None:
+        """The calibration's size and its group; merges every group's counts into ``tally``."""
+        if self.image_size is not None:
+            size = self.image_size
+        elif self.groups:
+            size = max(self.groups, key=lambda s: (self.groups[s].found, self.groups[s].tally.total))
+        else:
+            return None
+        for other, g in self.groups.items():
+            if other != size:
+                tally.rejected[Reason.SIZE_MISMATCH] += g.tally.total
+        chosen = self.groups.get(size)
+        if chosen is None:
+            return None
+        tally.used += chosen.tally.used
+        tally.rejected.update(chosen.tally.rejected)
+        return size, chosen
 
 
 def robot_from_topic(topic: str | None) -> str | None:
@@ -182,7 +252,8 @@ def _open_frames(source_spec, topic, max_seconds=None, done=None):
 def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model: str = "plumb_bob",
                          skew: bool = False, robot: str | None = None, out_dir=None, topic: str | None = None,
                          progress: Callable[[Iterable], Iterable] | None = None,
-                         keep_anyway: bool = False, max_seconds: float | None = None) -> IntrinsicRun:
+                         keep_anyway: bool = False, max_seconds: float | None = None,
+                         image_size: tuple[int, int] | None = None) -> IntrinsicRun:
     """Detect the board in every frame of a source, select samples, calibrate, write the YAML.
 
     Streams (bags, videos) use ROS's coverage rule: a detection becomes a sample only when
@@ -200,52 +271,61 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     keep_anyway : when the result fails :func:`~dtscal_lib.plausibility.intrinsic_doubts`, write it as
         ``<robot>.rejected.yaml`` and return it with ``run.doubts`` instead of raising
         :class:`~dtscal_lib.errors.ImplausibleCalibrationError` (``<robot>.yaml`` is never replaced by it)
+    image_size : (width, height) of the frames to calibrate; by default the size of the
+        frames in which the board is found most often. Frames of other sizes are counted as
+        ``size_mismatch`` and skipped.
     """
     check_board(board)
-    tracker: CoverageTracker | None = None
-    src = _open_frames(source_spec, topic, max_seconds, lambda: tracker is not None and tracker.ready())
+    groups = SizeGroups(board, image_size)
+    src = _open_frames(source_spec, topic, max_seconds, groups.ready)
     robot_name = (_robot_name(robot, src) if out_dir is not None
                   else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
     if out_dir is not None:
         check_output_folder(out_dir)
     tally = FrameTally()
-    stills_obj: list[np.ndarray] = []
-    stills_img: list[np.ndarray] = []
-    size = None
     frames = progress(src) if progress else src
     for frame, img in usable_images(frames, tally):
-        if size is None:
-            size = (int(img.shape[1]), int(img.shape[0]))
-            tracker = CoverageTracker(board, size)
+        group = groups.group(img)
+        group.tally.total += 1
+        if groups.image_size not in (None, group.tracker.image_size):
+            continue  # not the requested size: no detection, counted as size_mismatch at the end
         try:
             det = detect_board(img, board)
         except DtscalError as exc:  # a frame the detector cannot take: count it, go on
-            tally.reject(getattr(exc, "reason", "bad_frame"))
+            group.tally.reject(getattr(exc, "reason", None) or Reason.BAD_FRAME)
             continue
         except cv2.error:  # OpenCV choking on one odd frame must not end the run
-            tally.reject("detector_error")
+            group.tally.reject(Reason.DETECTOR_ERROR)
             continue
         if not det.found:
-            tally.reject(det.reason or "no_board")
+            group.tally.reject(det.reason or Reason.NO_BOARD)
             continue
+        group.found += 1
         if src.is_stream:
-            if tracker.offer(det):
-                tally.used += 1
+            if group.tracker.offer(det):
+                group.tally.used += 1
             else:
-                tally.reject("not_new_coverage")
+                group.tally.reject(Reason.NOT_NEW_COVERAGE)
         else:
-            tracker.offer(det)  # keeps the bars meaningful for stills too
-            stills_obj.append(board.object_points())
-            stills_img.append(det.corners)
-            tally.used += 1
+            group.tracker.offer(det)  # keeps the bars meaningful for stills too
+            group.obj.append(board.object_points())
+            group.img.append(det.corners)
+            group.tally.used += 1
     tally.rejected.update(getattr(src, "bad", {}))  # corrupt frames a live source skipped
-    if size is None:
+    resolved = groups.resolve(tally)
+    if resolved is None and groups.groups:
+        seen = ", ".join(f"{w}x{h}" for w, h in groups.groups)
+        raise DtscalError(f"{src.describe()}: no frame has the requested image size {image_size[0]}x{image_size[1]} "
+                          f"(sizes found: {seen}); pass the size of the camera's frames")
+    if resolved is None:
         raise DtscalError(f"{src.describe()}: no readable frame ({tally.total} frames, rejected: "
                           f"{dict(tally.rejected) or 'none'}); check the path and the topic")
+    size, group = resolved
+    tracker = group.tracker
     if src.is_stream:
         obj, imgp = tracker.object_and_image_points()
     else:
-        obj, imgp = stills_obj, stills_img
+        obj, imgp = group.obj, group.img
     if len(obj) < MIN_SAMPLES:
         raise CalibrationError(
             f"only {len(obj)} usable view(s) of the {board.describe()} board in {src.describe()} "
@@ -256,7 +336,7 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     result, dropped = calibrate_without_outlier_views(obj, imgp, size, model=model, skew=skew)
     if dropped:
         tally.used -= len(dropped)
-        tally.rejected["outlier_view"] += len(dropped)
+        tally.rejected[Reason.OUTLIER_VIEW] += len(dropped)
     run = IntrinsicRun(result, robot_name, tally, len(obj) - len(dropped), tracker.bars(), src.describe())
     calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
     gone = set(dropped)
@@ -330,12 +410,13 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
     for frame, img in usable_images(frames, tally):
         try:
             res = fit_on_image(img, camera, board)
-        except DtscalError as exc:
-            tally.reject(getattr(exc, "reason", None) or "no_board")
+        except DtscalError as exc:  # counted under the frame's own reason (size, NaN, board, homography)
+            tally.reject(getattr(exc, "reason", None) or Reason.HOMOGRAPHY_FAILED)
             last_error = exc
             continue
-        except cv2.error:  # OpenCV choking on one odd frame must not end the run
-            tally.reject("detector_error")
+        except cv2.error as exc:  # OpenCV choking on one odd frame must not end the run
+            tally.reject(Reason.DETECTOR_ERROR)
+            last_error = opencv_message(exc)
             continue
         tally.used += 1
         run = ExtrinsicRun(robot_name, res.H, frame.index, tally, np.asarray(res.residual_mm),
@@ -357,4 +438,4 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
 
 
 __all__ = ["calibrate_intrinsics", "calibrate_extrinsics", "IntrinsicRun", "ExtrinsicRun", "FrameTally",
-           "usable_images", "robot_from_topic"]
+           "usable_images", "SizeGroups", "robot_from_topic"]

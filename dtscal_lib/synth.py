@@ -482,10 +482,10 @@ def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
 
 
 def decode_jpeg(data: bytes) -> np.ndarray:
-    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
-    if img is None:
-        raise DtscalError("could not decode JPEG bytes")
-    return img
+    """BGR image of JPEG bytes, through the kit's one guarded decoder (:func:`~dtscal_lib.sources.decode_image`)."""
+    from .sources.decode import decode_image
+
+    return decode_image(data)
 
 
 # =========================================================================== scenes

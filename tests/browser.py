@@ -7,20 +7,15 @@ failure, elsewhere a skip.
 
 from __future__ import annotations
 
-import os
 import shutil
 
 import pytest
+from ci import in_ci  # noqa: F401 - the one CI rule; re-exported for the browser tests
 
 CHROMIUM_ARGS = [
     "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
 ]
-
-
-def in_ci() -> bool:
-    """True when CI is set to a true value, whatever its spelling (true, TRUE, 1, yes)."""
-    return os.environ.get("CI", "").strip().lower() in {"1", "true", "yes", "on"}
 
 
 def chromium_path() -> str:

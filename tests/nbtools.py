@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import os
 import re
 import time
 from pathlib import Path
 
 import nbformat
 import pytest
+from ci import in_ci
 
 ROOT = Path(__file__).resolve().parent.parent
 SOLUTIONS = ROOT / "solutions"
@@ -20,12 +20,8 @@ NOTEBOOK_BUDGET_S = 60.0
 REPORT_RE = re.compile(r"^\[( |x|!)\] (\w+):", re.MULTILINE)
 
 
-def in_ci() -> bool:
-    return os.environ.get("CI", "").lower() == "true"
-
-
 def need(path: Path) -> Path:
-    """``path`` if it exists; otherwise skip (or FAIL under CI=true: nothing may go missing there)."""
+    """``path`` if it exists; otherwise skip (or FAIL under CI, any spelling: nothing may go missing there)."""
     if not path.exists():
         msg = f"{path.relative_to(ROOT)} does not exist yet"
         if in_ci():

@@ -8,11 +8,11 @@ a strongly distorted image) the functions are checked by round trips.
 from __future__ import annotations
 
 import importlib
-import os
 
 import cv2
 import numpy as np
 import pytest
+from ci import in_ci
 
 from dtscal_lib import camera as cm
 from dtscal_lib import duckietown as dt
@@ -20,8 +20,8 @@ from dtscal_lib.errors import DtscalError
 
 
 def _require(name: str):
-    """Import a test dependency: skip without it locally, but FAIL under CI=true."""
-    if os.environ.get("CI", "").lower() == "true":
+    """Import a test dependency: skip without it locally, but FAIL under CI (any spelling)."""
+    if in_ci():
         return importlib.import_module(name)
     return pytest.importorskip(name)
 

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import importlib.util
-import os
 import math
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from ci import missing
 
 from dtscal_lib.boards import DUCKIETOWN_BOARD, Board
 from dtscal_lib.detect import (
@@ -303,9 +303,7 @@ def test_synthetic_session_recording():
     """Every 6th frame of data/session/intrinsics.bag against its truth file (if generated)."""
     bag, truth_file = SESSION / "intrinsics.bag", SESSION / "truth.yaml"
     if not (bag.exists() and truth_file.exists()):
-        if os.environ.get("CI") == "true":
-            pytest.fail("data/session is missing: run `dtscal synth --out data` (CI must have it)")
-        pytest.skip("data/session not generated yet (dtscal synth --out data)")
+        missing("data/session is missing: run `dtscal synth --out data`")
     import yaml
 
     from dtscal_lib.sources.bag import BagSource

@@ -548,3 +548,112 @@ def test_unknown_extension_and_fake_bag(tmp_path):
         open_source(ros2)
     with pytest.raises(SourceError, match="empty source"):
         open_source("  ")
+
+
+# ---------------------------------------------------------------------------- the guarded decode path
+from dtscal_lib.errors import Reason  # noqa: E402
+from dtscal_lib.sources import headers  # noqa: E402
+from dtscal_lib.sources.bagformat import MAX_CHUNK_BYTES  # noqa: E402
+from dtscal_lib.sources.decode import read_image_file  # noqa: E402
+
+
+@pytest.mark.parametrize("ext", [".jpg", ".png", ".bmp", ".ppm", ".pgm", ".tiff", ".webp", ".pbm"])
+def test_read_header_agrees_with_opencv(ext):
+    img = picture(3, (37, 23))
+    if ext in (".pgm", ".pbm"):
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    ok, buf = cv2.imencode(ext, img)
+    assert ok
+    h = headers.read_header(buf.tobytes())
+    assert (h.width, h.height) == (37, 23)
+    assert decode_image(buf.tobytes()).shape == (23, 37, 3)
+
+
+def test_pam_and_commented_pnm_headers():
+    assert headers.read_header(b"P7\nWIDTH 5\nHEIGHT 4\nDEPTH 3\nMAXVAL 255\nTUPLTYPE RGB\nENDHDR\n" + bytes(60)) \
+        == headers.ImageHeader("PAM", 5, 4)
+    assert headers.read_header(b"P6\n# made by hand\n7 # width\n3\n255\n" + bytes(63)).width == 7
+
+
+@pytest.mark.parametrize("w, h, reason", [(8192, 6000, None), (8193, 10, Reason.TOO_LARGE),
+                                          (8000, 7000, Reason.TOO_LARGE), (0, 10, Reason.CORRUPT_IMAGE)])
+def test_dimension_limits(w, h, reason):
+    if reason is None:
+        headers.check_dimensions(w, h)
+        return
+    with pytest.raises(FrameError) as e:
+        headers.check_dimensions(w, h)
+    assert e.value.reason is reason
+
+
+def test_a_png_beyond_the_limit_is_refused_before_decoding(monkeypatch):
+    ok, buf = cv2.imencode(".png", picture(1, (64, 48)))
+    monkeypatch.setattr(headers, "MAX_SIDE", 32)
+    with pytest.raises(FrameError) as e:
+        decode_image(buf.tobytes())
+    assert e.value.reason == "too_large" and "64x48" in str(e.value)
+
+
+@pytest.mark.parametrize("magic, name", [(b"GIF89a", "GIF"), (b"\x76\x2f\x31\x01", "OpenEXR"),
+                                         (b"#?RADIANCE\n", "Radiance"), (b"\x59\xa6\x6a\x95", "Sun raster")])
+def test_formats_without_a_header_check_are_not_decoded(magic, name):
+    with pytest.raises(FrameError) as e:
+        decode_image(magic + bytes(64))
+    assert e.value.reason is Reason.UNSUPPORTED_FORMAT and name in str(e.value)
+
+
+def test_a_decoder_exception_is_a_counted_reason(monkeypatch):
+    def boom(*_a):
+        raise cv2.error("OpenCV(4.x) imdecode_: something inside the codec")
+
+    monkeypatch.setattr(cv2, "imdecode", boom)
+    with pytest.raises(FrameError) as e:
+        decode_image(jpeg(picture(0)))
+    assert e.value.reason is Reason.DECODER_ERROR and "something inside the codec" in str(e.value)
+
+
+def test_read_image_file_refuses_special_files(tmp_path):
+    import os
+
+    os.mkfifo(tmp_path / "pipe.png")
+    os.symlink("/dev/null", tmp_path / "null.png")
+    for name, what in (("pipe.png", "FIFO"), ("null.png", "character device")):
+        with pytest.raises(FrameError) as e:
+            read_image_file(tmp_path / name, name)
+        assert e.value.reason is Reason.NOT_A_FILE and what in str(e.value)
+
+
+def test_reasons_are_strings_for_comparison_and_json():
+    import json
+
+    assert Reason.NO_BOARD == "no_board" and f"{Reason.TOO_LARGE}" == "too_large"
+    assert json.dumps({Reason.SIZE_MISMATCH: 1, "x": Reason.EMPTY}) == '{"size_mismatch": 1, "x": "empty"}'
+    assert FrameError("corrupt_jpeg", "m").reason is Reason.CORRUPT_JPEG
+    assert FrameError("a_plugin_reason", "m").reason == "a_plugin_reason"
+
+
+@pytest.mark.parametrize("compression", ["bz2", "lz4"])
+def test_a_chunk_that_outgrows_its_declared_size_stops_the_walk(tmp_path, compression, good_bag):
+    import bz2
+
+    import lz4.frame
+
+    zeros = bytes(4 << 20)
+    payload = bz2.compress(zeros) if compression == "bz2" else lz4.frame.compress(zeros)
+    data = good_bag.read_bytes()
+    hlen = struct.unpack_from("<I", data, 13)[0]
+    at = data.find(b"index_pos=", 17, 17 + hlen) + len(b"index_pos=")
+    body = data[: struct.unpack_from("<Q", data, at)[0]]
+
+    def field(k, v):
+        f = k + b"=" + v
+        return struct.pack("<I", len(f)) + f
+
+    for declared, status in ((1000, "damaged"), (MAX_CHUNK_BYTES + 1, "too_large")):
+        head = (field(b"op", b"\x05") + field(b"compression", compression.encode())
+                + field(b"size", struct.pack("<I", declared)))
+        rec = struct.pack("<I", len(head)) + head + struct.pack("<I", len(payload)) + payload
+        path = tmp_path / f"{declared}.bag"
+        path.write_bytes(body + rec)
+        end = [x for x in scan_bag(path) if isinstance(x, ScanEnd)]
+        assert [e.status for e in end] == [status], end

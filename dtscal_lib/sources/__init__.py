@@ -14,7 +14,8 @@ spec                    kind       is_stream   frames
 ======================  =========  ==========  =============================================
 
 Bad data never stops a source: a frame that cannot be used comes out with ``image=None``
-and an ``error`` (a :class:`~dtscal_lib.errors.FrameError` whose ``reason`` is a short key),
+and an ``error`` (a :class:`~dtscal_lib.errors.FrameError` whose ``reason`` is a
+:class:`~dtscal_lib.errors.Reason`),
 and the next frame follows. A bag cut short yields every message still readable, then one
 last frame with reason ``"truncated"``. Only a source that cannot be opened at all raises
 :class:`~dtscal_lib.errors.SourceError`, with a message that says what to pass instead.
@@ -26,11 +27,12 @@ Live cameras (a Duckiebot over ROS 1, a webcam, a stream, a recording played as 
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 from ..errors import SourceError
 from .bag import BagSource, list_image_topics, write_compressed_image_bag
-from .decode import decode_image
+from .decode import decode_image, describe_file_type
 from .files import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, StillsSource, VideoSource, folder_source, glob_source
 from .frame import Frame, FrameSource
 from .live import LiveSource, LiveStatus, open_live
@@ -75,7 +77,8 @@ def open_source(spec: str | os.PathLike, *, topic: str | None = None) -> FrameSo
 
     def no_topic(kind: str) -> None:
         if topic is not None:
-            raise SourceError(f"topic={topic!r} only applies to ROS bags, but {text!r} is a {kind}; drop topic=")
+            raise SourceError(f"--topic {topic!r} only applies to ROS bags, but {text!r} is a {kind}; drop --topic "
+                              "(topic= in Python)")
 
     if not path.exists():
         if _GLOB_CHARS & set(text):
@@ -96,6 +99,7 @@ def open_source(spec: str | os.PathLike, *, topic: str | None = None) -> FrameSo
             )
         no_topic("folder")
         return folder_source(path, text)
+    _check_regular_file(path, text)
     ext = path.suffix.lower()
     if ext == ".bag" or _starts_like_bag(path):
         return BagSource(path, topic=topic, spec=text)
@@ -109,6 +113,20 @@ def open_source(spec: str | os.PathLike, *, topic: str | None = None) -> FrameSo
         f"do not know how to read {path.name!r} (extension {ext or 'none'}); pass a ROS 1 bag (.bag), a video "
         f"({', '.join(sorted(VIDEO_EXTENSIONS))}), a folder of images or a glob pattern like 'frames/*.png'"
     )
+
+
+def _check_regular_file(path: Path, text: str) -> None:
+    """Refuse a FIFO, a device, a socket (or a symlink to one) before anything opens it.
+
+    Opening a FIFO for reading blocks until a writer comes; ``/dev/zero`` never ends.
+    """
+    try:
+        mode = path.stat().st_mode
+    except OSError as err:
+        raise SourceError(f"cannot read source {text!r}: {err.strerror}") from None
+    if not stat.S_ISREG(mode):
+        raise SourceError(f"source {text!r} is {describe_file_type(mode)}, not a regular file; pass a recording saved "
+                          "as a file (a .bag, a video), a folder of images or a glob pattern")
 
 
 def _starts_like_bag(path: Path) -> bool:

@@ -1,15 +1,18 @@
 """ROS 1 bags: read camera frames from them, write them.
 
-Reading uses ``rosbags`` (pure Python, no ROS install needed) with its ROS 1 Noetic type
-store. When ``rosbags`` refuses a bag because its index is missing (a file cut short, a
-recording that was killed) the tolerant sequential reader of :mod:`.bagformat` takes
-over: every message before the damage is still yielded, followed by one frame with
-error reason ``"truncated"`` that says how many frames were read.
+Messages are read by the bounded sequential reader of :mod:`.bagformat` (the one bag
+reader of the kit) and deserialized with ``rosbags``' ROS 1 Noetic type store (pure
+Python, no ROS install needed). ``rosbags`` reads the index only, for the topics and the
+message counts; when it refuses a bag because its index is missing (a file cut short, a
+recording that was killed) the sequential walk finds them instead. Every message before
+damage is still yielded, followed by one frame with error reason ``"truncated"`` (or
+``"too_large"`` for a decompression bomb) that says how many frames were read.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -17,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FrameError, SourceError
+from ..errors import FrameError, Reason, SourceError
 from .bagformat import MAGIC, RawConnection, RawMessage, ScanEnd, scan_bag
-from .decode import decode_image, raw_image_to_bgr
+from .decode import decode_image, describe_file_type, raw_image_to_bgr
 from .frame import Frame, FrameSource, error_frame
 
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
@@ -72,8 +75,10 @@ class BagInfo:
 def _check_bag_file(path: Path) -> None:
     if not path.exists():
         raise SourceError(f"bag file {str(path)!r} does not exist; check the path (relative paths start at {os.getcwd()})")
-    if path.is_dir():
-        raise SourceError(f"{str(path)!r} is a folder, not a ROS 1 bag file")
+    mode = path.stat().st_mode
+    if not stat.S_ISREG(mode):
+        raise SourceError(f"{str(path)!r} is {describe_file_type(mode)}, not a ROS 1 bag file; pass the recording "
+                          "saved as a file")
     try:
         with path.open("rb") as f:
             head = f.read(len(MAGIC))
@@ -165,8 +170,10 @@ def choose_image_topic(info: BagInfo, topic: str | None, bag_name: str) -> str:
         hint = f"pass one of: {', '.join(images)}" if images else "this bag has no image topic at all"
         raise SourceError(f"topic {topic!r} is not in {bag_name}; {hint}. All topics: {listing}")
     if not images and info.end is not None and info.end.status != "complete":
+        what = {"too_large": "holds more data than the kit reads at once", "damaged": "is damaged"}.get(
+            info.end.status, "is cut short")
         raise SourceError(
-            f"{bag_name} is cut short before any camera topic could be read ({info.end.detail}; topics found: "
+            f"{bag_name} {what} before any camera topic could be read ({info.end.detail}; topics found: "
             f"{listing}); copy the recording from the robot again"
         )
     if not images:
@@ -180,7 +187,8 @@ def choose_image_topic(info: BagInfo, topic: str | None, bag_name: str) -> str:
     if len(images) == 1:
         return images[0]
     choices = camera or images
-    raise SourceError(f"{bag_name} has several image topics ({', '.join(choices)}); choose one with topic=")
+    raise SourceError(f"{bag_name} has several image topics ({', '.join(choices)}); choose one with --topic "
+                      "(topic= in Python)")
 
 
 class BagSource(FrameSource):
@@ -226,7 +234,7 @@ class BagSource(FrameSource):
         try:
             msg = typestore.deserialize_ros1(data, self.msgtype)
         except Exception as err:  # noqa: BLE001 - any decoding failure is this frame's problem only
-            return error_frame(index, stamp, name, "unreadable",
+            return error_frame(index, stamp, name, Reason.UNREADABLE,
                                f"message {index} on {self.topic} is not a valid {_ros1_name(self.msgtype)} ({err})")
         hs = msg.header.stamp
         if hs.sec or hs.nanosec:
@@ -240,17 +248,6 @@ class BagSource(FrameSource):
             return Frame(index=index, stamp=stamp, image=None, error=err, name=name)
         return Frame(index=index, stamp=stamp, image=image, error=None, name=name)
 
-    def _messages_indexed(self) -> Iterator[tuple[bytes, int] | ScanEnd]:
-        from rosbags.rosbag1 import Reader
-
-        try:
-            with Reader(self.path) as reader:
-                conns = [c for c in reader.connections if c.topic == self.topic]
-                for _conn, time_ns, data in reader.messages(connections=conns):
-                    yield bytes(data), int(time_ns)
-        except Exception as err:  # noqa: BLE001 - damaged chunk under an intact index
-            yield ScanEnd("damaged", -1, f"reading stopped on damaged data ({type(err).__name__}: {err})")
-
     def _messages_sequential(self) -> Iterator[tuple[bytes, int] | ScanEnd]:
         wanted: set[int] = set()
         for item in scan_bag(self.path):
@@ -260,21 +257,53 @@ class BagSource(FrameSource):
             elif isinstance(item, RawMessage):
                 if item.conn_id in wanted:
                     yield item.data, item.time_ns
-            elif item.status != "complete":
+            elif item.status != "complete" and not (self.info.indexed and item.status == "no_index"):
                 yield item
+
+    def compressed_images(self) -> Iterator[tuple[int, int, bytes]]:
+        """``(index, header stamp in ns, encoded bytes)`` of every message of a CompressedImage topic.
+
+        The raw payloads, undecoded, read by the same bounded reader as the frames.
+
+        Raises
+        ------
+        SourceError
+            The topic is not ``sensor_msgs/CompressedImage``, a message does not deserialize,
+            or the bag ends damaged or cut short.
+        """
+        if self.msgtype != COMPRESSED_IMAGE:
+            raise SourceError(f"topic {self.topic} of {self.path.name} carries {_ros1_name(self.msgtype)}, "
+                              "not sensor_msgs/CompressedImage")
+        typestore = _typestore()
+        index = 0
+        for item in self._messages_sequential():
+            if isinstance(item, ScanEnd):
+                raise SourceError(f"bag {self.path.name} ends badly after {index} messages of {self.topic}: "
+                                  f"{item.detail}")
+            data, time_ns = item
+            try:
+                msg = typestore.deserialize_ros1(data, self.msgtype)
+            except Exception as err:  # noqa: BLE001 - rosbags raises many types on malformed bytes
+                raise SourceError(f"message {index} on {self.topic} of {self.path.name} is not a valid "
+                                  f"CompressedImage ({type(err).__name__})") from None
+            stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+            yield index, stamp, bytes(msg.data)
+            index += 1
 
     def __iter__(self) -> Iterator[Frame]:
         typestore = _typestore()
-        messages = self._messages_sequential() if self.info.end is not None else self._messages_indexed()
+        messages = self._messages_sequential()
         index = 0
         last_stamp = 0.0
         for item in messages:
             if isinstance(item, ScanEnd):
-                reason = "unreadable" if item.status == "damaged" else "truncated"
+                reason = {"damaged": Reason.UNREADABLE,
+                          "too_large": Reason.TOO_LARGE}.get(item.status, Reason.TRUNCATED)
                 what = {
                     "truncated": "is truncated (cut short)",
                     "no_index": "has no index (the recording was not closed, or the copy was cut short)",
                     "damaged": "is damaged",
+                    "too_large": "holds more data than the kit reads at once (a damaged or hostile file)",
                 }[item.status]
                 advice = ("run `rosbag reindex` on it to make it a normal bag, or copy the recording from the robot "
                           "again" if item.status == "no_index" else

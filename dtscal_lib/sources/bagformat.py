@@ -21,7 +21,13 @@ The format (http://wiki.ros.org/Bags/Format/2.0), all integers little-endian::
     op 0x04 index data, 0x06 chunk info: the index; skipped here.
 
 A chunk cut in the middle still gives up the records it holds before the cut: an
-uncompressed chunk directly, bz2 and lz4 chunks through a streaming decompressor.
+uncompressed chunk directly, bz2 and lz4 chunks through a streaming decompressor. The
+decompressor never produces more than the chunk's declared size, and no chunk or record
+beyond :data:`MAX_CHUNK_BYTES` is read: a decompression bomb ends the walk with status
+``"too_large"``.
+
+This is the only reader of message data in the kit (the bundled session included);
+``rosbags`` is used for the index only, because it decompresses a whole chunk without bound.
 """
 
 from __future__ import annotations
@@ -44,6 +50,9 @@ OP_CONNECTION = 0x07
 #: a record header larger than this is garbage, not a header (real ones are < 200 bytes;
 #: a connection's long message definition lives in its data, not its header)
 _MAX_HEADER = 1 << 20
+#: largest chunk (uncompressed) or record read: ROS writes 768 KiB chunks, and a single
+#: message bigger than that (a raw 4K frame is 25 MB) gets a chunk of its own
+MAX_CHUNK_BYTES = 128 * 1024 * 1024
 
 _u32 = struct.Struct("<I")
 _u64 = struct.Struct("<Q")
@@ -79,6 +88,8 @@ class ScanEnd:
         closed recording has (recording killed, or the copy cut exactly between records).
         ``"truncated"``: the file ends in the middle of a record.
         ``"damaged"``: a record is malformed (garbage where a header should be).
+        ``"too_large"``: a chunk or record declares (or decompresses to) more than
+        :data:`MAX_CHUNK_BYTES`; the walk stops there instead of allocating it.
     offset
         Byte offset of the record where the walk stopped (file size when complete).
     detail
@@ -182,32 +193,45 @@ def _records_in(buf: bytes) -> Iterator[tuple[dict[str, bytes], bytes]]:
         pos = start + dlen
 
 
-def _decompress(compression: str, data: bytes, complete: bool) -> tuple[bytes, bool]:
+class _TooLarge(Exception):
+    """A chunk or record beyond :data:`MAX_CHUNK_BYTES`."""
+
+
+def _decompress(compression: str, data: bytes, complete: bool, size: int | None = None) -> tuple[bytes, bool]:
     """Chunk payload -> (raw records, whether the payload was complete).
 
-    A partial payload is decompressed as far as it goes.
+    A partial payload is decompressed as far as it goes. ``size`` is the chunk's declared
+    uncompressed size: the output is never allowed beyond it (nor beyond
+    :data:`MAX_CHUNK_BYTES`), so a few kilobytes of bz2 cannot expand into gigabytes.
     """
+    limit = MAX_CHUNK_BYTES if size is None else size
+    if limit > MAX_CHUNK_BYTES:
+        raise _TooLarge(f"chunk declares {limit} bytes uncompressed, beyond the limit of {MAX_CHUNK_BYTES >> 20} MiB")
     if compression == "none":
         return data, complete
     if compression == "bz2":
         dec = bz2.BZ2Decompressor()
         try:
-            out = dec.decompress(data)
+            out = dec.decompress(data, max_length=limit + 1)
         except (OSError, ValueError, EOFError) as err:
             raise _Garbage(f"bz2 chunk does not decompress: {err}") from None
-        return out, complete and dec.eof
-    if compression == "lz4":
+    elif compression == "lz4":
         try:
             import lz4.frame  # rosbags depends on it
         except ImportError:  # pragma: no cover - rosbags always brings lz4
             raise _Garbage("lz4 chunk but the lz4 package is not installed") from None
         dec = lz4.frame.LZ4FrameDecompressor()
         try:
-            out = dec.decompress(data)
+            out = dec.decompress(data, max_length=limit + 1)
         except RuntimeError as err:
             raise _Garbage(f"lz4 chunk does not decompress: {err}") from None
-        return out, complete and dec.eof
-    raise _Garbage(f"unknown chunk compression {compression!r}")
+    else:
+        raise _Garbage(f"unknown chunk compression {compression!r}")
+    if len(out) > limit:
+        if size is None:
+            raise _TooLarge(f"{compression} chunk decompresses to more than {MAX_CHUNK_BYTES >> 20} MiB")
+        raise _Garbage(f"{compression} chunk decompresses to more than its declared {size} bytes")
+    return out, complete and dec.eof
 
 
 def _read_record(f: BinaryIO) -> tuple[dict[str, bytes], bytes, bool] | None:
@@ -232,6 +256,8 @@ def _read_record(f: BinaryIO) -> tuple[dict[str, bytes], bytes, bool] | None:
     if len(raw) < 4:
         raise _Cut()
     (dlen,) = _u32.unpack(raw)
+    if dlen > MAX_CHUNK_BYTES:
+        raise _TooLarge(f"record declares {dlen} bytes of data, beyond the limit of {MAX_CHUNK_BYTES >> 20} MiB")
     data = f.read(dlen)
     return fields, data, len(data) == dlen
 
@@ -258,6 +284,7 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
             raise ValueError(f"{path.name} does not start with {MAGIC!r}; it is not a ROS 1 (v2.0) bag")
         index_pos = 0
         saw_index = False
+        chunk_count = chunk_infos = 0  # the index ends with one chunk-info record per chunk
         saw_chunk = False
         seen_conn: set[int] = set()
         while True:
@@ -270,9 +297,15 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
             except _Garbage as err:
                 yield ScanEnd("damaged", offset, f"the record at byte {offset} is damaged ({err})")
                 return
+            except _TooLarge as err:
+                yield ScanEnd("too_large", offset, f"the record at byte {offset} is refused: {err}")
+                return
             if rec is None:
                 # an empty bag (no chunks) has an empty index: nothing to miss
-                if saw_index or (index_pos > 0 and not saw_chunk):
+                if saw_index and chunk_infos < chunk_count:
+                    yield ScanEnd("truncated", offset, f"the file ends at byte {size} inside its index ({chunk_infos} "
+                                                       f"of {chunk_count} chunk records); every message was read")
+                elif saw_index or (index_pos > 0 and not saw_chunk):
                     yield ScanEnd("complete", offset, "read the whole bag")
                 else:
                     yield ScanEnd("no_index", offset, f"the file ends at byte {size} without the index a closed recording has")
@@ -280,12 +313,18 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
             fields, data, complete = rec
             try:
                 op = _op(fields)
+                if not complete and op != OP_CHUNK:  # a partial chunk still gives its records; others nothing
+                    yield ScanEnd("truncated", offset, f"the file ends inside a record that starts at byte {offset} "
+                                                       f"of {size}")
+                    return
                 if op == OP_BAG_HEADER:
                     index_pos = _uint(fields, "index_pos")
+                    chunk_count = _uint(fields, "chunk_count") if "chunk_count" in fields else 0
                 elif op == OP_CHUNK:
                     saw_chunk = True
                     compression = fields.get("compression", b"none").decode("ascii", "replace")
-                    inner, inner_complete = _decompress(compression, data, complete)
+                    declared = _uint(fields, "size") if "size" in fields else None
+                    inner, inner_complete = _decompress(compression, data, complete, declared)
                     try:
                         for ifields, idata in _records_in(inner):
                             iop = _op(ifields)
@@ -312,12 +351,16 @@ def scan_bag(path: str | Path) -> Iterator[RawConnection | RawMessage | ScanEnd]
                         yield RawMessage(_uint(fields, "conn"), _time_ns(fields), data)
                 elif op == OP_CHUNK_INFO:
                     saw_index = True
+                    chunk_infos += 1
             except _Garbage as err:
                 yield ScanEnd("damaged", offset, f"the record at byte {offset} is damaged ({err})")
+                return
+            except _TooLarge as err:
+                yield ScanEnd("too_large", offset, f"the record at byte {offset} is refused: {err}")
                 return
             if not complete:
                 yield ScanEnd("truncated", offset, f"the file ends inside a record that starts at byte {offset} of {size}")
                 return
 
 
-__all__ = ["scan_bag", "RawConnection", "RawMessage", "ScanEnd", "MAGIC", "parse_fields"]
+__all__ = ["scan_bag", "RawConnection", "RawMessage", "ScanEnd", "MAGIC", "MAX_CHUNK_BYTES", "parse_fields"]

@@ -5,20 +5,30 @@ decodes to a picture whose lower part is flat grey, with only a libjpeg warning 
 stderr. A calibration fed such a frame would find a board in the top half and never
 know. So :func:`decode_image` checks the JPEG end-of-image marker (``FF D9``) *before*
 decoding and refuses a JPEG without it.
+
+It is also the one guarded decode path of the kit (bags, folders, the bundled session,
+the synthesizer): the declared size is read from the header and checked against
+:data:`~.headers.MAX_SIDE` / :data:`~.headers.MAX_PIXELS` before OpenCV allocates anything
+(:mod:`.headers`), and every decoder error, ``cv2.error`` included, becomes a
+:class:`~dtscal_lib.errors.FrameError` with a :class:`~dtscal_lib.errors.Reason`.
+:func:`read_image_file` reads a file for it, refusing FIFOs, devices and files too big to be
+a frame.
 """
 
 from __future__ import annotations
 
+import os
+import stat
+
 import cv2
 import numpy as np
 
-from ..errors import FrameError
+from ..errors import FrameError, Reason, opencv_message
+from .headers import JPEG_SOI, MAX_PIXELS, MAX_SIDE, check_dimensions, read_header
 
-JPEG_SOI = b"\xff\xd8\xff"
 JPEG_EOI = b"\xff\xd9"
-PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-#: magic numbers of the other still-image formats OpenCV reads, for error messages only
-_OTHER_MAGIC = (b"BM", b"II*\x00", b"MM\x00*", b"RIFF", b"P5", b"P6", b"P2", b"P3")
+#: largest image file read from disk (a camera frame at the pixel limit is far smaller)
+MAX_FILE_BYTES = 256 * 1024 * 1024
 
 
 def _strip_padding(data: bytes) -> bytes:
@@ -73,6 +83,53 @@ def jpeg_scan_problem(raw: bytes) -> str | None:
     return None
 
 
+def read_image_file(path: str | os.PathLike, name: str | None = None) -> bytes:
+    """The bytes of an image file, refusing what cannot be a frame file.
+
+    The file is opened without blocking and checked with ``fstat`` on the open descriptor,
+    so a FIFO (which would block forever), a device such as ``/dev/zero`` (endless), a
+    socket, or a symlink to one is refused, and so is a regular file larger than
+    :data:`MAX_FILE_BYTES`.
+
+    Raises
+    ------
+    FrameError
+        ``not_a_file`` for a FIFO, device or socket; ``too_large`` beyond the size limit;
+        ``unreadable`` when the file cannot be opened or read.
+    """
+    name = name or os.fspath(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
+    except OSError as err:
+        raise FrameError(Reason.UNREADABLE, f"cannot read {name}: {err.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise FrameError(Reason.NOT_A_FILE, f"{name} is {describe_file_type(st.st_mode)}, not a regular file; "
+                                                "it is skipped (copy the frames into a folder as files)")
+        if st.st_size > MAX_FILE_BYTES:
+            raise FrameError(Reason.TOO_LARGE, f"{name} has {st.st_size} bytes, more than the {MAX_FILE_BYTES >> 20} "
+                                               "MiB an image frame may have; it is skipped")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as err:
+        raise FrameError(Reason.UNREADABLE, f"cannot read {name}: {err.strerror}") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_FILE_BYTES:
+        raise FrameError(Reason.TOO_LARGE, f"{name} grew beyond {MAX_FILE_BYTES >> 20} MiB while being read; skipped")
+    return data
+
+
+def describe_file_type(mode: int) -> str:
+    """``"a FIFO (named pipe)"``, ``"a character device"``, ... for a non-regular ``st_mode``."""
+    for test, text in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder")):
+        if test(mode):
+            return text
+    return "not a regular file"
+
+
 def is_jpeg(data: bytes) -> bool:
     """True when ``data`` starts with the JPEG start-of-image marker."""
     return data[:3] == JPEG_SOI
@@ -96,8 +153,11 @@ def decode_image(data: bytes | bytearray | memoryview | np.ndarray) -> np.ndarra
         ``reason="empty"`` for zero bytes; ``"corrupt_jpeg"`` for a JPEG that lacks its
         end-of-image marker (cut short), has a stray marker inside its image data (see
         :func:`jpeg_scan_problem`) or that OpenCV cannot decode; ``"corrupt_image"``
-        for another known format that does not decode; ``"not_an_image"`` for bytes that
-        are no image format at all.
+        for another format that does not decode or whose header is damaged;
+        ``"too_large"`` when the header declares more than ``MAX_SIDE`` px a side or
+        ``MAX_PIXELS`` pixels (checked before decoding); ``"decoder_error"`` when OpenCV
+        raises; ``"unsupported_format"`` for GIF, JPEG 2000, EXR, HDR, ...;
+        ``"not_an_image"`` for bytes that are no image format at all.
 
     Examples
     --------
@@ -110,30 +170,39 @@ def decode_image(data: bytes | bytearray | memoryview | np.ndarray) -> np.ndarra
     else:
         raw = bytes(data)
     if len(raw) == 0:
-        raise FrameError("empty", "the frame holds no data (0 bytes); the camera sent an empty message")
+        raise FrameError(Reason.EMPTY, "the frame holds no data (0 bytes); the camera sent an empty message")
     jpeg = is_jpeg(raw)
     if jpeg and not _strip_padding(raw).endswith(JPEG_EOI):
         raise FrameError(
-            "corrupt_jpeg",
+            Reason.CORRUPT_JPEG,
             f"JPEG of {len(raw)} bytes has no end-of-image marker (FF D9): it was cut short "
             "in transfer or recording; the frame is skipped",
         )
+    header = read_header(raw)
+    check_dimensions(header.width, header.height, f"{header.format} of {len(raw)} bytes")
     if jpeg:
         problem = jpeg_scan_problem(raw)
         if problem is not None:
-            raise FrameError("corrupt_jpeg", f"JPEG of {len(raw)} bytes is damaged ({problem}); the frame is skipped")
+            raise FrameError(Reason.CORRUPT_JPEG,
+                             f"JPEG of {len(raw)} bytes is damaged ({problem}); the frame is skipped")
     buf = np.frombuffer(raw, dtype=np.uint8)
-    image = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    level = cv2.getLogLevel()
+    cv2.setLogLevel(0)  # silent: OpenCV would print its own copy of a decoder error on stderr
+    try:
+        image = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    except cv2.error as err:
+        detail = opencv_message(err)
+        raise FrameError(Reason.DECODER_ERROR, f"OpenCV's decoder failed on a {header.format} of {len(raw)} bytes "
+                                               f"({detail}); the frame is skipped") from None
+    finally:
+        cv2.setLogLevel(level)
     if image is None or image.size == 0:
-        if jpeg:
-            raise FrameError("corrupt_jpeg", f"JPEG of {len(raw)} bytes cannot be decoded; the frame is skipped")
-        if raw.startswith(PNG_MAGIC) or raw.startswith(_OTHER_MAGIC):
-            raise FrameError("corrupt_image", f"image of {len(raw)} bytes is damaged and cannot be decoded")
-        raise FrameError(
-            "not_an_image",
-            f"{len(raw)} bytes starting {raw[:8]!r} are not an image format OpenCV reads "
-            "(expected JPEG or PNG)",
-        )
+        reason = Reason.CORRUPT_JPEG if jpeg else Reason.CORRUPT_IMAGE
+        raise FrameError(reason, f"{header.format} of {len(raw)} bytes is damaged and cannot be decoded; "
+                                 "the frame is skipped")
+    if image.shape[0] * image.shape[1] > MAX_PIXELS or max(image.shape[:2]) > MAX_SIDE:  # never, if headers agree
+        raise FrameError(Reason.TOO_LARGE, f"{header.format} decoded to {image.shape[1]}x{image.shape[0]} pixels, "
+                                           "beyond the kit's limit; the frame is skipped")
     if image.ndim == 2:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     return image
@@ -166,18 +235,20 @@ def raw_image_to_bgr(height: int, width: int, encoding: str, step: int, data: by
     channels = {"bgr8": 3, "rgb8": 3, "8UC3": 3, "mono8": 1, "8UC1": 1, "bgra8": 4, "rgba8": 4}.get(encoding)
     if channels is None:
         raise FrameError(
-            "unsupported_encoding",
+            Reason.UNSUPPORTED_ENCODING,
             f"raw image encoding {encoding!r} is not supported; record the camera's compressed topic "
             f"(image/compressed) or use one of {', '.join(RAW_ENCODINGS)}",
         )
     height, width, step = int(height), int(width), int(step)
     if height <= 0 or width <= 0:
-        raise FrameError("empty", f"raw image has size {width}x{height}")
+        raise FrameError(Reason.EMPTY, f"raw image has size {width}x{height}")
+    check_dimensions(width, height, f"raw {encoding} image")
     if step < width * channels:
-        raise FrameError("corrupt_image", f"raw image row step {step} is smaller than width*channels = {width * channels}")
+        raise FrameError(Reason.CORRUPT_IMAGE,
+                         f"raw image row step {step} is smaller than width*channels = {width * channels}")
     buf = np.frombuffer(bytes(data) if not isinstance(data, np.ndarray) else data.astype(np.uint8).tobytes(), np.uint8)
     if buf.size < step * height:
-        raise FrameError("truncated", f"raw image has {buf.size} bytes, expected step*height = {step * height}")
+        raise FrameError(Reason.TRUNCATED, f"raw image has {buf.size} bytes, expected step*height = {step * height}")
     rows = buf[: step * height].reshape(height, step)[:, : width * channels]
     img = rows.reshape(height, width, channels)
     if encoding in ("mono8", "8UC1"):
@@ -191,4 +262,5 @@ def raw_image_to_bgr(height: int, width: int, encoding: str, step: int, data: by
     return img.copy()
 
 
-__all__ = ["decode_image", "jpeg_scan_problem", "raw_image_to_bgr", "is_jpeg", "RAW_ENCODINGS"]
+__all__ = ["decode_image", "read_image_file", "describe_file_type", "jpeg_scan_problem", "raw_image_to_bgr", "is_jpeg",
+           "RAW_ENCODINGS", "MAX_FILE_BYTES"]

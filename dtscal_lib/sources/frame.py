@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FrameError
+from ..errors import FrameError, Reason
 
 
 @dataclass
@@ -29,8 +29,9 @@ class Frame:
     image : (H, W, 3) uint8 BGR array, or None
         The decoded picture; ``None`` exactly when ``error`` is set.
     error : FrameError or None
-        Why the frame is unusable; ``error.reason`` is a short key (``"corrupt_jpeg"``,
-        ``"empty"``, ``"not_an_image"``, ``"unreadable"``, ``"truncated"``, ...).
+        Why the frame is unusable; ``error.reason`` is a :class:`~dtscal_lib.errors.Reason`
+        (a string enum: ``"corrupt_jpeg"``, ``"empty"``, ``"too_large"``, ``"not_a_file"``,
+        ``"truncated"``, ...).
     name : str
         Human-readable origin, e.g. ``"intrinsics.bag#17"`` or ``"img_003.png"``.
     """
@@ -104,7 +105,7 @@ def natural_key(name: str) -> tuple:
     return tuple((0, int(p), p) if p.isdigit() else (1, 0, p.lower()) for p in parts)
 
 
-def error_frame(index: int, stamp: float, name: str, reason: str, message: str) -> Frame:
+def error_frame(index: int, stamp: float, name: str, reason: "Reason | str", message: str) -> Frame:
     """A :class:`Frame` that carries only an error."""
     return Frame(index=index, stamp=stamp, image=None, error=FrameError(reason, message), name=name)
 
