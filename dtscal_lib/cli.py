@@ -7,6 +7,7 @@ Sub-commands::
     dtscal calibrate-intrinsics    frames -> camera_intrinsic/<ROBOT>.yaml
     dtscal calibrate-extrinsics    one frame on the board -> camera_extrinsic/<ROBOT>.yaml
     dtscal release OUT | --check   write the student version of the course / check notebooks/
+    dtscal grade SUBMISSION        grade notebooks against the hidden cases (instructor)
 
 Exit codes: 0 success, 1 a check failed, 2 bad input (the message says what to do).
 """
@@ -200,6 +201,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--ip", default=None)
     sp.add_argument("--no-browser", action="store_true")
     sp.set_defaults(func=cmd_course)
+
+    from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
+
+    add_grade_parser(sub)
     return p
 
 
