@@ -57,7 +57,8 @@ CHECKS = {
              atol=0.0, rtol=1e-6),
         dict(name="12 noisy views (0.3 px)", weight=2, seed=640297, views=12, sigma=0.3, camera="duckie",
              atol=0.0, rtol=2e-3),
-        dict(name="fewer than 3 views must raise ValueError", weight=2, seed=640301, views=2, judge="raises"),
+        dict(name="fewer than 3 views must raise ValueError", weight=1, seed=640301, views=2, judge="raises"),
+        dict(name="a single view must raise ValueError", weight=1, seed=640302, views=1, judge="raises"),
         dict(name="returns float64 (3, 3)", weight=1, seed=640303, views=4, judge="dtype"),
     ],
     "extrinsics_from_homography": [

@@ -22,7 +22,7 @@ import numpy as np
 from .. import duckietown as dt
 from ..camera import intrinsic_matrix, new_camera_matrix
 from ..errors import DtscalError
-from .sandbox import Call, CheckRun
+from .sandbox import CheckRun
 
 CAMERAS = {
     "duckie": intrinsic_matrix(307.7, 315.0, 329.7, 244.5),
@@ -307,8 +307,9 @@ def judge_raises(built: Built, run: CheckRun):
         if c.ok:
             return 0.0, f"should raise ValueError (the input does not determine the answer), but returned " \
                         f"{_describe_value(c.value)}"
-        if not c.error.startswith("ValueError"):
-            return 0.0, f"should raise ValueError, raised {c.error}"
+        if not c.error.startswith("ValueError") or "math domain error" in c.error:
+            return 0.0, f"should raise ValueError saying what is wrong (check the number of views first), " \
+                        f"raised {c.error}"
     return 1.0, ""
 
 

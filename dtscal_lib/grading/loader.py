@@ -60,7 +60,8 @@ def read_cells(path: Path) -> list[tuple[str, int]]:
         nb = json.loads(path.read_text(encoding="utf-8", errors="replace"))
         cells = nb["cells"]
     except (ValueError, KeyError, TypeError) as exc:
-        raise DtscalError(f"{path} is not a readable notebook ({exc}); hand in the .ipynb file saved by Jupyter") from None
+        raise DtscalError(f"{path} is not a readable notebook ({exc}); hand in the .ipynb file Jupyter saved") \
+            from None
     blocks, line = [], 1
     for cell in cells:
         if not isinstance(cell, dict) or cell.get("cell_type") != "code":

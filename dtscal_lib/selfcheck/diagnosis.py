@@ -30,6 +30,7 @@ import numpy as np
 from .. import duckietown as dt
 from ..camera import intrinsic_matrix, new_camera_matrix
 from ..camera import undistort_normalized as _newton_undistort
+from .projection import K_SKEWED
 
 __all__ = ["Mistake", "diagnose", "diagnose_function", "probe_args", "MISTAKES", "FUNCTIONS"]
 
@@ -48,8 +49,8 @@ class Mistake:
 
 
 # --------------------------------------------------------------------------- probe inputs
-#: cameras of the probes (the same values as the self-checks use)
-K_PROBE = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=6.0)
+#: the camera of the probes: the self-checks' skewed camera
+K_PROBE = K_SKEWED
 
 
 def _pose(seed: int, distance: float = 0.6):
@@ -130,7 +131,7 @@ def _probes(func: str) -> tuple:
         obj = np.array([[x, y] for y in range(5) for x in range(7)], float) * 0.031
         img = _homog(H, obj) + rng.normal(0.0, 1.0, size=(len(obj), 2))
         H_noisy = cv2.findHomography(obj, img, 0)[0]
-        return ((K_PROBE, 2.0 * H), (K_PROBE, H_noisy))
+        return ((K_PROBE, -2.0 * H), (K_PROBE, H_noisy))
     if func in ("distort_normalized", "undistort_normalized"):
         xy = rng.uniform(-0.6, 0.6, size=(12, 2))
         d = np.array([-0.21, 0.045, 0.012, -0.009, -0.006])
@@ -206,9 +207,7 @@ def _zhang_K(b, *, use_lambda=True, skew_term=True, keep_skew=True, s_sign=1.0):
 def _pose_from_H(K, H, *, orthonormalize=True, front=True):
     A = np.linalg.solve(K, H)
     lam = 1.0 / np.linalg.norm(A[:, 0])
-    if front and A[2, 2] * lam < 0:
-        lam = -lam
-    if not front and A[2, 2] * lam > 0:
+    if front and A[2, 2] * lam < 0:  # front=False: the sign of lambda is never chosen
         lam = -lam
     r1, r2, t = lam * A[:, 0], lam * A[:, 1], lam * A[:, 2]
     Q = np.column_stack([r1, r2, np.cross(r1, r2)])
@@ -316,8 +315,12 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable]]]] = {
          lambda s, d: _fit_variant(s, d, "inverted")),
         (_M("not_scaled", "H is not scaled: divide by H[2, 2] at the end so that H[2, 2] = 1", EQ36),
          lambda s, d: _fit_variant(s, d, "unscaled")),
+        (_M("H_transposed", "H is transposed: reshape h row by row (h.reshape(3, 3)), H maps [x, y, 1]^T", EQ36),
+         lambda s, d: _fit_variant(s, d, "transposed_n")),
         (_M("bad_denormalization", "bad denormalization: undo the normalization as H = inv(T_dst) @ H_n @ T_src",
             EQ36), lambda s, d: _fit_variant(s, d, "bad_denorm")),
+        (_M("bad_denormalization", "bad denormalization: undo the normalization as H = inv(T_dst) @ H_n @ T_src",
+            EQ36), lambda s, d: _fit_variant(s, d, "no_denorm")),
         (_M("no_normalization", "no normalization: without Hartley's normalization the DLT fails on "
             "coordinates in the thousands; centre and scale both point sets first", EQ36),
          lambda s, d: _raw_dlt(s, d)),
@@ -347,8 +350,8 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable]]]] = {
     "extrinsics_from_homography": (lambda K, H: _pose_from_H(K, H), [
         (_M("not_orthonormalized", "R is not orthonormalized: replace [r1 r2 r1 x r2] by the nearest rotation "
             "U @ Vt from its SVD", EQ36), lambda K, H: _pose_from_H(K, H, orthonormalize=False)),
-        (_M("board_behind", "the board is behind the camera (sign of t): if t_z < 0, flip the sign of lambda",
-            EQ36), lambda K, H: _pose_from_H(K, H, front=False)),
+        (_M("board_behind", "the board is behind the camera (sign of t): H has any sign; if t_z < 0, flip the "
+            "sign of lambda", EQ36), lambda K, H: _pose_from_H(K, H, front=False)),
     ]),
     "distort_normalized": (lambda xy, d: _cv_distort(xy, d), [
         (_M("tangential_swapped", "tangential terms swapped: x_d gets 2 p1 x y + p2 (r^2 + 2 x^2), y_d gets "
@@ -407,7 +410,8 @@ def _fit_variant(src, dst, how):
         return H  # compared up to scale, see _matches
     Ts, Td = _hartley(np.asarray(src, float)), _hartley(np.asarray(dst, float))
     Hn = Td @ H @ np.linalg.inv(Ts)
-    Hb = Ts @ Hn @ np.linalg.inv(Td) if how == "bad_denorm" else Hn
+    Hb = {"bad_denorm": Ts @ Hn @ np.linalg.inv(Td), "no_denorm": Hn,
+          "transposed_n": np.linalg.inv(Td) @ Hn.T @ Ts}[how]
     return Hb / Hb[2, 2]
 
 
@@ -467,9 +471,13 @@ def diagnose(func: str, args_list: list[tuple], outputs: list[Any]) -> Mistake |
     dtype = func == "rectification_maps"
     if all(_close(g, w, dtype=dtype) for g, w in zip(got, wants)):
         return None
+    if func == "estimate_homography":  # the wrong fits are modelled on the noise-free probe only
+        exact = slice(0, 1)
+    else:
+        exact = slice(None)
     for mistake, model in models:
         if mistake.key == "not_scaled":
-            if all(_same_up_to_scale(g, w) for g, w in zip(got, wants)):
+            if all(_same_up_to_scale(g, w) for g, w in zip(got[exact], wants[exact])):
                 return mistake
             continue
         try:
@@ -486,7 +494,7 @@ def diagnose(func: str, args_list: list[tuple], outputs: list[Any]) -> Mistake |
             if _close(got[-1], wrong[-1], rtol=1e-4):
                 return mistake
             continue
-        if all(_close(g, w, dtype=dtype) for g, w in zip(got, wrong)):
+        if all(_close(g, w, dtype=dtype) for g, w in zip(got[exact], wrong[exact])):
             return mistake
     return None
 
