@@ -69,6 +69,20 @@ def _unshare_network() -> str:
     return "python-level socket block only"
 
 
+def _world_readable(path: str) -> bool:
+    """Can any user read ``path`` (every folder above it searchable)?"""
+    import stat
+
+    path = os.path.realpath(path)
+    if not os.stat(path).st_mode & stat.S_IROTH:
+        return False
+    while path != os.path.dirname(path):
+        path = os.path.dirname(path)
+        if not os.stat(path).st_mode & stat.S_IXOTH:
+            return False
+    return True
+
+
 def _lock_in(job: dict) -> dict:
     notes = {}
     try:
@@ -76,7 +90,12 @@ def _lock_in(job: dict) -> dict:
     except Exception as exc:  # no ctypes/libc: fall back to the audit hook
         notes["network"] = f"python-level socket block only ({exc})"
     work = job["workdir"]
-    if os.getuid() == 0:
+    import sysconfig
+
+    needed = [sysconfig.get_paths()["stdlib"], sysconfig.get_paths()["purelib"], os.path.dirname(__file__)]
+    if os.getuid() == 0 and not all(_world_readable(p) for p in needed):
+        notes["user"] = "root (Python is installed where user nobody cannot read it)"
+    elif os.getuid() == 0:
         os.chown(work, NOBODY, NOBODY)
         for d in (job["outdir"],):
             os.chown(d, NOBODY, NOBODY)

@@ -8,6 +8,7 @@ the sandbox (:mod:`.sandbox`), judge the answers against the references computed
 
 from __future__ import annotations
 
+import ast
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,17 +77,22 @@ class GradeResult:
 
 
 def _skip_import(src: str) -> bool:
-    head = src.lstrip()
-    if not head.startswith(("import ", "from ")):
+    """True for an import of course plumbing only (every name it imports is skippable)."""
+    try:
+        node = ast.parse(src).body[0]
+    except (SyntaxError, IndexError):
         return False
-    words = head.replace(",", " ").split()
-    mods = [words[1]] if head.startswith("from ") else [w for w in words[1:] if w != "as"]
-    for m in mods:
-        if any(m == a or m.startswith(a + ".") for a in ALLOWED_KIT_IMPORTS):
-            return False
-        if any(m == s or m.startswith(s + ".") for s in SKIPPED_IMPORTS):
-            return True
-    return False
+    if isinstance(node, ast.Import):
+        names = [a.name for a in node.names]
+    elif isinstance(node, ast.ImportFrom) and node.module:
+        names = [f"{node.module}.{a.name}" for a in node.names]
+    else:
+        return False
+
+    def under(m, roots):
+        return any(m == r or m.startswith(r + ".") for r in roots)
+
+    return all(under(m, SKIPPED_IMPORTS) and not under(m, ALLOWED_KIT_IMPORTS) for m in names)
 
 
 def grade_file(path, material: Material, assignment: str, *, student: str = "",

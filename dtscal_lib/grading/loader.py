@@ -112,11 +112,22 @@ def load_submission(path) -> Submission:
             else:
                 start = node.lineno
             sub.statements.append((seg, first + start - 1))
-    for name, fn in sub.functions.items():
-        hits = forbidden_calls(fn, aliases)
+    direct = {name: forbidden_calls(fn, aliases) for name, fn in sub.functions.items()}
+    for name, fn in sub.functions.items():  # through the submission's own helpers, at any depth
+        hits, seen, todo = set(direct[name]), {name}, [name]
+        while todo:
+            for callee in _called_names(sub.functions[todo.pop()]):
+                if callee in sub.functions and callee not in seen:
+                    seen.add(callee)
+                    todo.append(callee)
+                    hits.update(f"{h} (through {callee})" for h in direct[callee])
         if hits:
-            sub.forbidden[name] = hits
+            sub.forbidden[name] = sorted(hits)
     return sub
+
+
+def _called_names(fn: ast.AST) -> set[str]:
+    return {n.id for n in ast.walk(fn) if isinstance(n, ast.Name)}
 
 
 def _record_aliases(node, aliases: dict) -> None:
