@@ -150,7 +150,7 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
             frac = min(1.0, max(0.0, float(frac)))
             printed = next((c.stdout for c in cr.calls if c.stdout.strip()), "")
             if printed and frac < 1:
-                msg += f"\nprinted: {printed[:300]}"
+                msg += f"\nprinted: {printed[:300]}" + (" ... (output truncated)" if len(printed) > 300 else "")
             fr.tests[i] = TestResult(b.name, fr.name, round(frac * b.weight, 4), b.weight, msg)
         for fr in res.functions:
             if fr.status == "graded" and all(t.output.startswith("not implemented") for t in fr.tests):
