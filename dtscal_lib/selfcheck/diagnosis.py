@@ -14,8 +14,8 @@ solution notebooks.
 >>> d = diagnose_function("project_points", lambda K, R, t, X: ((X @ R.T + t) @ K.T)[:, :2])
 >>> d.key
 'no_perspective_division'
->>> print(d.line())
-diagnosis: no perspective division: divide the homogeneous pixel K (R X + t) by its third coordinate (activity text, eq. (1)-(2))
+>>> print(d.line())  # doctest: +ELLIPSIS
+diagnosis: no perspective division: divide the homogeneous pixel K (R X + t) by its third coordinate ...
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ import cv2
 import numpy as np
 
 from .. import duckietown as dt
-from ..camera import intrinsic_matrix, new_camera_matrix
+from ..boards import Board, ground_points
+from ..camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
 from ..camera import undistort_normalized as _newton_undistort
 from .projection import K_SKEWED
 
@@ -151,6 +152,12 @@ def _probes(func: str) -> tuple:
     raise KeyError(func)
 
 
+def _PROBE_POSE():
+    """The true pose of the exact probe of extrinsics_from_homography."""
+    _, R, t = _views(K_PROBE, 1, 906)[0]
+    return R, t
+
+
 def probe_args(func: str) -> list[tuple]:
     """Fresh copies of the probe inputs of ``func`` (a list of argument tuples)."""
     return [tuple(np.array(a, copy=True) if isinstance(a, np.ndarray) else
@@ -159,14 +166,29 @@ def probe_args(func: str) -> list[tuple]:
 
 
 # --------------------------------------------------------------------------- mistake models
+# Right answers come from OpenCV, the kit's library or the probes' ground truth. A mistake
+# is modelled as the right answer on transformed inputs (R.T for R, -t for t...), a
+# transformed right answer (columns swapped, points reordered), or, for Zhang's closed
+# form and the pose, a predicate on how the answer differs from the truth.
 def _cv_distort(xy, d):
     X = np.column_stack([xy, np.ones(len(xy))])
     return cv2.projectPoints(X, np.zeros(3), np.zeros(3), np.eye(3), np.asarray(d, float))[0].reshape(-1, 2)
 
 
-def _project(K, R, t, X, divide=True):
-    p = (X @ R.T + t) @ K.T
-    return p[:, :2] / p[:, 2:3] if divide else p[:, :2]
+def _normalized(R, t, X):
+    Xc = np.asarray(X, float) @ np.asarray(R, float).T + np.reshape(t, (1, 3))
+    return Xc[:, :2] / Xc[:, 2:]
+
+
+def _project(K, R, t, X):
+    """Pixels by the kit's camera model (normalized coordinates, then K with skew)."""
+    return normalized_to_pixel(_normalized(R, t, X), K)
+
+
+def _undivided(K, R, t, X):
+    """The homogeneous pixel before its division: pixel times depth."""
+    Xc = np.asarray(X, float) @ np.asarray(R, float).T + np.reshape(t, (1, 3))
+    return _project(K, R, t, X) * Xc[:, 2:]
 
 
 def _noskew(K):
@@ -175,93 +197,79 @@ def _noskew(K):
     return K
 
 
-def _v(H, i, j):
-    a, b = H[:, i], H[:, j]
-    return np.array([a[0] * b[0], a[0] * b[1] + a[1] * b[0], a[1] * b[1],
-                     a[2] * b[0] + a[0] * b[2], a[2] * b[1] + a[1] * b[2], a[2] * b[2]])
+def _homog(H, pts):
+    return cv2.perspectiveTransform(np.asarray(pts, float).reshape(-1, 1, 2), np.asarray(H, float)).reshape(-1, 2)
 
 
-def _constraints(H, combine=np.subtract, order=(0, 1, 2, 3, 4, 5)):
+def _homog_undivided(H, pts):
+    pts = np.asarray(pts, float)
+    w = (np.asarray(H, float)[2, :2] @ pts.T + H[2, 2]).reshape(-1, 1)
+    return _homog(H, pts) * w
+
+
+def _constraints(H, combine=np.subtract):
+    """Rows of V by what they mean: column k holds the constraints for b = e_k."""
     H = np.asarray(H, float)
-    V = np.vstack([_v(H, 0, 1), combine(_v(H, 0, 0), _v(H, 1, 1))])
-    return V[:, list(order)]
+    h1, h2 = H[:, 0], H[:, 1]
+    cols = []
+    for k, (i, j) in enumerate([(0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2)]):
+        B = np.zeros((3, 3))
+        B[i, j] = B[j, i] = 1.0
+        cols.append([h1 @ B @ h2, combine(h1 @ B @ h1, h2 @ B @ h2)])
+    return np.array(cols).T
 
 
-def _b_true(Hs):
-    V = np.vstack([_constraints(H / np.linalg.norm(H)) for H in Hs])
-    b = np.linalg.svd(V)[2][-1]
-    return b if b[0] > 0 else -b
+def _maps(K, d, new_K, size):
+    return cv2.initUndistortRectifyMap(np.asarray(K, float), np.asarray(d, float), None, np.asarray(new_K, float),
+                                       tuple(int(s) for s in size), cv2.CV_32FC1)
 
 
-def _zhang_K(b, *, use_lambda=True, skew_term=True, keep_skew=True, s_sign=1.0):
-    B11, B12, B22, B13, B23, B33 = b
-    cy = (B12 * B13 - B11 * B23) / (B11 * B22 - B12 ** 2)
-    lam = B33 - (B13 ** 2 + cy * (B12 * B13 - B11 * B23)) / B11 if use_lambda else 1.0
-    fx = np.sqrt(lam / B11)
-    fy = np.sqrt(lam * B11 / (B11 * B22 - B12 ** 2))
-    s = -s_sign * B12 * fx ** 2 * fy / lam
-    cx = (s * cy / fy if skew_term else 0.0) - B13 * fx ** 2 / lam
-    return np.array([[fx, s if keep_skew else 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+def _maps_in_pixels(K, d, new_K, size):
+    w, h = (int(n) for n in size)
+    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    xy_d = _cv_distort(np.column_stack([u.ravel(), v.ravel()]), d)
+    return xy_d[:, 0].reshape(h, w).astype(np.float32), xy_d[:, 1].reshape(h, w).astype(np.float32)
 
 
-def _pose_from_H(K, H, *, orthonormalize=True, front=True):
-    A = np.linalg.solve(K, H)
-    lam = 1.0 / np.linalg.norm(A[:, 0])
-    if front and A[2, 2] * lam < 0:  # front=False: the sign of lambda is never chosen
-        lam = -lam
-    r1, r2, t = lam * A[:, 0], lam * A[:, 1], lam * A[:, 2]
-    Q = np.column_stack([r1, r2, np.cross(r1, r2)])
-    if orthonormalize:
-        U, _, Wt = np.linalg.svd(Q)
-        Q = U @ Wt
-    return Q, t
+def _ground(cols, rows, sq, x0, y0):
+    return ground_points(Board(int(cols), int(rows), float(sq)), x0, y0)
 
 
-def _distort(xy, d, *, swap_p=False, r_power=2, use_k3=True):
-    k1, k2, p1, p2, k3 = np.asarray(d, float)[:5]
-    if swap_p:
-        p1, p2 = p2, p1
-    x, y = xy[:, 0], xy[:, 1]
-    r2 = x * x + y * y
-    r = np.sqrt(r2) if r_power == 1 else r2
-    rho = 1 + k1 * r + k2 * r ** 2 + (k3 * r ** 3 if use_k3 else 0.0)
-    return np.column_stack([x * rho + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
-                            y * rho + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y])
+def _ground_reordered(cols, rows, sq, x0, y0, how):
+    g = _ground(cols, rows, sq, x0, y0).reshape(int(rows), int(cols), 2)
+    return {"col": g.transpose(1, 0, 2), "left": g[:, ::-1]}[how].reshape(-1, 2)
 
 
-def _fixed_point(xy_d, d, n):
-    k1, k2, p1, p2, k3 = np.asarray(d, float)[:5]
+def _radial_in_r(xy, d):
+    """The plumb_bob radial factor evaluated at r instead of r^2 (tangential part from OpenCV)."""
+    d = np.asarray(d, float)
+    r = np.hypot(xy[:, 0], xy[:, 1])[:, None]
+    tangential = _cv_distort(xy, [0.0, 0.0, d[2], d[3], 0.0]) - xy
+    return xy * (1 + d[0] * r + d[1] * r ** 2 + d[4] * r ** 3) + tangential
+
+
+def _with(d, **changes):
+    d = np.array(d, float)
+    for k, v in changes.items():
+        d["k1 k2 p1 p2 k3".split().index(k)] = v
+    return d
+
+
+def _fixed_point(xy_d, d, n, divide=True):
+    """n plain fixed-point steps, by OpenCV's distortion split into its radial and tangential parts:
+    ``x <- (x_d - tangential(x)) / radial(x)`` (``divide``), or ``x <- x + (x_d - distort(x))``."""
+    d = np.asarray(d, float)
     xy = np.array(xy_d, float)
     for _ in range(n):
-        x, y = xy[:, 0], xy[:, 1]
-        r2 = x * x + y * y
-        rho = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
-        dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-        dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        xy = np.column_stack([(xy_d[:, 0] - dx) / rho, (xy_d[:, 1] - dy) / rho])
+        if not divide:
+            xy = xy + (xy_d - _cv_distort(xy, d))
+            continue
+        tangential = _cv_distort(xy, [0.0, 0.0, d[2], d[3], 0.0]) - xy
+        scaled = _cv_distort(xy, [d[0], d[1], 0.0, 0.0, d[4]])
+        big = np.abs(xy[:, 0]) >= np.abs(xy[:, 1])
+        radial = np.where(big, scaled[:, 0] / np.where(big, xy[:, 0], 1.0), scaled[:, 1] / np.where(big, 1.0, xy[:, 1]))
+        xy = (xy_d - tangential) / radial[:, None]
     return xy
-
-
-def _maps(K, d, new_K, size, *, back=None, pixels=False):
-    w, h = int(size[0]), int(size[1])
-    u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-    pix = np.column_stack([u.ravel(), v.ravel(), np.ones(u.size)])
-    if pixels:  # the lens model applied to pixel coordinates
-        xy_d = _distort(pix[:, :2], d)
-        return xy_d[:, 0].reshape(h, w).astype(np.float32), xy_d[:, 1].reshape(h, w).astype(np.float32)
-    rays = pix @ np.linalg.inv(back if back is not None else new_K).T
-    xy_d = _distort(rays[:, :2] / rays[:, 2:], d)
-    p = np.column_stack([xy_d, np.ones(len(xy_d))]) @ np.asarray(K, float).T
-    return p[:, 0].reshape(h, w).astype(np.float32), p[:, 1].reshape(h, w).astype(np.float32)
-
-
-def _ground(cols, rows, sq, x0, y0, *, order="row", from_left=False, off=(0, 0), swap_xy=False):
-    k = np.arange(cols * rows)
-    i, j = (k // cols, k % cols) if order == "row" else (k % rows, k // rows)
-    if from_left:
-        j = cols - 1 - j
-    pts = np.column_stack([x0 + (i + off[0]) * sq, y0 + (j + off[1]) * sq])
-    return pts[:, ::-1] if swap_xy else pts
 
 
 def _M(key, text, eq):
@@ -272,37 +280,39 @@ EQ12 = "eq. (1)-(2)"
 EQ6 = "eq. (6)"
 EQ36 = "eq. (3)-(6)"
 EQ1213 = "eq. (12)-(13)"
+PLUMB = "the plumb_bob model"
 
-#: the correct answer, then (mistake, wrong answer) per exercise function
-MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable]]]] = {
+#: the correct answer, then (mistake, wrong answer) per exercise function; None marks the
+#: functions whose mistakes are recognised by predicates (see _PREDICATES)
+MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
     "project_points": (_project, [
         (_M("no_perspective_division", "no perspective division: divide the homogeneous pixel K (R X + t) by its "
-            "third coordinate", EQ12), lambda K, R, t, X: _project(K, R, t, X, divide=False)),
+            "third coordinate", EQ12), _undivided),
         (_M("R_transposed", "R is transposed: with points as rows the camera frame is X @ R.T + t", EQ12),
          lambda K, R, t, X: _project(K, R.T, t, X)),
         (_M("K_transposed", "K is transposed: with points as rows the pixels are Xc @ K.T", EQ12),
-         lambda K, R, t, X: _project(K.T, R, t, X)),
+         lambda K, R, t, X: _homog(np.asarray(K).T, _normalized(R, t, X))),
         (_M("t_subtracted", "t is subtracted: the camera frame is R X + t, not R X - t", EQ12),
-         lambda K, R, t, X: _project(K, R, -t, X)),
+         lambda K, R, t, X: _project(K, R, -np.asarray(t), X)),
         (_M("uv_swapped", "u and v are swapped: column 0 is u (horizontal, from fx, s, cx), column 1 is v", EQ12),
          lambda K, R, t, X: _project(K, R, t, X)[:, ::-1]),
         (_M("skew_dropped", "the skew s = K[0, 1] is dropped: multiply by the whole K", EQ12),
          lambda K, R, t, X: _project(_noskew(K), R, t, X)),
     ]),
-    "apply_homography": (lambda H, p: _homog(H, p), [
+    "apply_homography": (_homog, [
         (_M("H_transposed", "H is transposed: with points as rows the product is [x, y, 1] @ H.T", EQ6),
          lambda H, p: _homog(H.T, p)),
         (_M("no_division", "no division when applying H: divide u and v by the third coordinate w", EQ6),
-         lambda H, p: _homog(H, p, divide=False)),
+         _homog_undivided),
         (_M("H_inverted", "H is inverted: apply H itself, it maps the points forward", EQ6),
          lambda H, p: _homog(np.linalg.inv(H), p)),
         (_M("uv_swapped", "the two output columns are swapped", EQ6), lambda H, p: _homog(H, p)[:, ::-1]),
     ]),
-    "pixel_to_ground": (lambda H, p: _homog(H, p), [
+    "pixel_to_ground": (_homog, [
         (_M("H_transposed", "H is transposed in pixel_to_ground: ground = H [u, v, 1]^T, with points as rows "
             "[u, v, 1] @ H.T", EQ6), lambda H, p: _homog(H.T, p)),
         (_M("no_division", "no division in pixel_to_ground: divide by the third homogeneous coordinate", EQ6),
-         lambda H, p: _homog(H, p, divide=False)),
+         _homog_undivided),
         (_M("H_inverted", "H is inverted: the ground homography already maps pixels to the ground", EQ6),
          lambda H, p: _homog(np.linalg.inv(H), p)),
         (_M("axes_swapped", "the ground axes are swapped: column 0 is x (forward), column 1 is y (left)", EQ6),
@@ -325,71 +335,67 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable]]]] = {
             "coordinates in the thousands; centre and scale both point sets first", EQ36),
          lambda s, d: _raw_dlt(s, d)),
     ]),
-    "intrinsic_constraints": (lambda H: _constraints(H), [
+    "intrinsic_constraints": (_constraints, [
         (_M("rows_not_columns", "v_ij built from the rows of H: h1 and h2 are the COLUMNS H[:, 0], H[:, 1]",
             EQ1213), lambda H: _constraints(np.asarray(H).T)),
         (_M("second_as_sum", "the second constraint as a sum: row 1 is v11 - v22 (h1^T B h1 = h2^T B h2)",
             "eq. (13)"), lambda H: _constraints(H, combine=np.add)),
         (_M("b_order", "b's elements in the wrong order: b = (B11, B12, B22, B13, B23, B33)", EQ1213),
-         lambda H: _constraints(H, order=(0, 1, 3, 2, 4, 5))),
+         lambda H: _constraints(H)[:, [0, 1, 3, 2, 4, 5]]),
         (_M("b_order", "b's elements in the wrong order: b = (B11, B12, B22, B13, B23, B33)", EQ1213),
-         lambda H: _constraints(H, order=(0, 2, 1, 3, 4, 5))),
+         lambda H: _constraints(H)[:, [0, 2, 1, 3, 4, 5]]),
         (_M("rows_swapped", "the two rows are swapped: row 0 is v12 (eq. 12), row 1 is v11 - v22 (eq. 13)",
             EQ1213), lambda H: _constraints(H)[::-1]),
     ]),
-    "intrinsics_from_homographies": (lambda Hs: _zhang_K(_b_true(Hs)), [
+    "intrinsics_from_homographies": (lambda Hs: K_PROBE, [
         (_M("lambda_ignored", "lambda ignored: B = lambda K^-T K^-1 is known up to scale; compute lambda and use "
-            "it in fx, fy, s, cx", EQ1213), lambda Hs: _zhang_K(_b_true(Hs), use_lambda=False)),
-        (_M("skew_dropped", "the skew is dropped: K[0, 1] = s = -B12 fx^2 fy / lambda", EQ1213),
-         lambda Hs: _zhang_K(_b_true(Hs), keep_skew=False)),
+            "it in fx, fy, s, cx", EQ1213), None),
+        (_M("skew_dropped", "the skew is dropped: K[0, 1] = s = -B12 fx^2 fy / lambda", EQ1213), None),
         (_M("principal_point_formula", "principal point formula slip: cx = s cy / fy - B13 fx^2 / lambda "
-            "(the skew term is missing)", EQ1213), lambda Hs: _zhang_K(_b_true(Hs), skew_term=False)),
-        (_M("skew_formula", "skew formula slip: s = -B12 fx^2 fy / lambda (sign)", EQ1213),
-         lambda Hs: _zhang_K(_b_true(Hs), s_sign=-1.0)),
+            "(the skew term is missing)", EQ1213), None),
+        (_M("skew_formula", "skew formula slip: s = -B12 fx^2 fy / lambda (sign)", EQ1213), None),
     ]),
-    "extrinsics_from_homography": (lambda K, H: _pose_from_H(K, H), [
+    "extrinsics_from_homography": (None, [
         (_M("not_orthonormalized", "R is not orthonormalized: replace [r1 r2 r1 x r2] by the nearest rotation "
-            "U @ Vt from its SVD", EQ36), lambda K, H: _pose_from_H(K, H, orthonormalize=False)),
+            "U @ Vt from its SVD", EQ36), None),
         (_M("board_behind", "the board is behind the camera (sign of t): H has any sign; if t_z < 0, flip the "
-            "sign of lambda", EQ36), lambda K, H: _pose_from_H(K, H, front=False)),
+            "sign of lambda", EQ36), None),
     ]),
-    "distort_normalized": (lambda xy, d: _cv_distort(xy, d), [
+    "distort_normalized": (_cv_distort, [
         (_M("tangential_swapped", "tangential terms swapped: x_d gets 2 p1 x y + p2 (r^2 + 2 x^2), y_d gets "
-            "p1 (r^2 + 2 y^2) + 2 p2 x y", "the plumb_bob model"), lambda xy, d: _distort(xy, d, swap_p=True)),
-        (_M("radial_in_r", "radial terms in r instead of r^2: 1 + k1 r^2 + k2 r^4 + k3 r^6", "the plumb_bob model"),
-         lambda xy, d: _distort(xy, d, r_power=1)),
-        (_M("k3_ignored", "k3 ignored: dist = (k1, k2, p1, p2, k3), k3 multiplies r^6", "the plumb_bob model"),
-         lambda xy, d: _distort(xy, d, use_k3=False)),
+            "p1 (r^2 + 2 y^2) + 2 p2 x y", PLUMB), lambda xy, d: _cv_distort(xy, _with(d, p1=d[3], p2=d[2]))),
+        (_M("radial_in_r", "radial terms in r instead of r^2: 1 + k1 r^2 + k2 r^4 + k3 r^6", PLUMB), _radial_in_r),
+        (_M("k3_ignored", "k3 ignored: dist = (k1, k2, p1, p2, k3), k3 multiplies r^6", PLUMB),
+         lambda xy, d: _cv_distort(xy, _with(d, k3=0.0))),
     ]),
     "undistort_normalized": (lambda xy, d: _newton_undistort(xy, d), [
         (_M("fixed_iterations", "a fixed small number of undistortion iterations: iterate until "
             "distort(x) matches x_d (about 1e-12), and use Newton's method where the fixed point stalls",
-            "the plumb_bob model"), None),
+            PLUMB), None),
     ]),
-    "rectification_maps": (lambda K, d, nK, size: _maps(K, d, nK, size), [
+    "rectification_maps": (_maps, [
         (_M("new_K_ignored", "new_K ignored: back-project rectified pixels with new_K^-1, distort, project with K",
-            "the plumb_bob model"), lambda K, d, nK, size: _maps(K, d, nK, size, back=K)),
+            PLUMB), lambda K, d, nK, size: _maps(K, d, K, size)),
         (_M("distort_pixels", "distortion applied in pixels instead of normalized coordinates: go pixel -> "
-            "new_K^-1 -> distort -> K", "the plumb_bob model"),
-         lambda K, d, nK, size: _maps(K, d, nK, size, pixels=True)),
-        (_M("maps_swapped", "map_x and map_y swapped: map_x holds the source x (column) coordinate",
-            "the plumb_bob model"), lambda K, d, nK, size: _maps(K, d, nK, size)[::-1]),
-        (_M("maps_transposed", "the maps are transposed: they are (height, width) arrays, map_x[v, u]",
-            "the plumb_bob model"), lambda K, d, nK, size: tuple(m.T for m in _maps(K, d, nK, size))),
-        (_M("maps_dtype", "the maps have the wrong dtype: cv2.remap wants float32", "the plumb_bob model"),
+            "new_K^-1 -> distort -> K", PLUMB), _maps_in_pixels),
+        (_M("maps_swapped", "map_x and map_y swapped: map_x holds the source x (column) coordinate", PLUMB),
+         lambda K, d, nK, size: _maps(K, d, nK, size)[::-1]),
+        (_M("maps_transposed", "the maps are transposed: they are (height, width) arrays, map_x[v, u]", PLUMB),
+         lambda K, d, nK, size: tuple(m.T for m in _maps(K, d, nK, size))),
+        (_M("maps_dtype", "the maps have the wrong dtype: cv2.remap wants float32", PLUMB),
          lambda K, d, nK, size: tuple(m.astype(np.float64) for m in _maps(K, d, nK, size))),
     ]),
-    "board_ground_points": (lambda *a: _ground(*a), [
+    "board_ground_points": (_ground, [
         (_M("axes_swapped", "ground axes swapped: column 0 is x (forward), column 1 is y (left)", EQ6),
-         lambda *a: _ground(*a, swap_xy=True)),
+         lambda *a: _ground(*a)[:, ::-1]),
         (_M("column_order", "corners in column order: go along the near row first (k % cols across, k // cols "
-            "away)", EQ6), lambda *a: _ground(*a, order="col")),
+            "away)", EQ6), lambda *a: _ground_reordered(*a, "col")),
         (_M("from_left", "corners starting from the left: corner 0 is the near-RIGHT corner and y grows to the "
-            "left", EQ6), lambda *a: _ground(*a, from_left=True)),
+            "left", EQ6), lambda *a: _ground_reordered(*a, "left")),
         (_M("off_by_one_square", "ground points off by one square: corner 0 is at (x0, y0) itself", EQ6),
-         lambda *a: _ground(*a, off=(1, 0))),
+         lambda c, r, sq, x0, y0: _ground(c, r, sq, x0 + sq, y0)),
         (_M("off_by_one_square", "ground points off by one square: corner 0 is at (x0, y0) itself", EQ6),
-         lambda *a: _ground(*a, off=(0, 1))),
+         lambda c, r, sq, x0, y0: _ground(c, r, sq, x0, y0 + sq)),
     ]),
 }
 FUNCTIONS = tuple(MISTAKES)
@@ -399,20 +405,52 @@ def _fit_variant(src, dst, how):
     """Exact-data answers of right and wrong homography fits (from OpenCV's fit)."""
     H = cv2.findHomography(np.asarray(src, float), np.asarray(dst, float), 0)[0]
     H = H / H[2, 2]
-    if how == "right":
+    if how in ("right", "unscaled"):  # "unscaled" is compared up to scale, see diagnose
         return H
     if how == "transposed":
         return H.T / H[2, 2]
     if how == "inverted":
         Hi = np.linalg.inv(H)
         return Hi / Hi[2, 2]
-    if how == "unscaled":
-        return H  # compared up to scale, see _matches
     Ts, Td = _hartley(np.asarray(src, float)), _hartley(np.asarray(dst, float))
     Hn = Td @ H @ np.linalg.inv(Ts)
     Hb = {"bad_denorm": Ts @ Hn @ np.linalg.inv(Td), "no_denorm": Hn,
           "transposed_n": np.linalg.inv(Td) @ Hn.T @ Ts}[how]
     return Hb / Hb[2, 2]
+
+
+def _k_predicates(K, K_true) -> str | None:
+    """Which Zhang slip turns the true K into ``K`` (by the entries that differ, and how)."""
+    f = lambda a, b: abs(a - b) <= 1e-5 * abs(K_true[0, 0])  # noqa: E731
+    fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
+    t_fx, t_s, t_cx, t_fy, t_cy = K_true[0, 0], K_true[0, 1], K_true[0, 2], K_true[1, 1], K_true[1, 2]
+    if f(cy, t_cy) and not f(fx, t_fx) and abs(fx / t_fx - fy / t_fy) < 1e-6:
+        return "lambda_ignored"
+    if f(fx, t_fx) and f(fy, t_fy) and f(cy, t_cy):
+        if abs(s) < 1e-9 and t_s != 0:
+            return "skew_dropped"
+        if f(s, t_s) and not f(cx, t_cx) and abs((t_cx - cx) - t_s * t_cy / t_fy) < 1e-5 * abs(t_fx):
+            return "principal_point_formula"
+        if f(s, -t_s) and t_s != 0:
+            return "skew_formula"
+    return None
+
+
+def _pose_predicates(args_list, got) -> str | None:
+    """Not orthonormalized (the noisy probe) or the board behind the camera (the negative-scale probe)."""
+    (K0, H0), (K1, H1) = args_list
+    R_true, t_true = _PROBE_POSE()
+    parts = got[0]
+    if len(parts) == 2 and parts[0].shape == (3, 3) and parts[1].size == 3:
+        R, t = parts[0].astype(float), parts[1].astype(float).ravel()
+        if np.allclose(t, -t_true, rtol=1e-6, atol=1e-9) and np.allclose(R[:, 2], R_true[:, 2], atol=1e-6):
+            return "board_behind"
+    parts = got[-1]
+    if len(parts) == 2 and parts[0].shape == (3, 3):
+        R = parts[0].astype(float)
+        if np.all(np.isfinite(R)) and np.abs(R.T @ R - np.eye(3)).max() > 1e-6:
+            return "not_orthonormalized"
+    return None
 
 
 # --------------------------------------------------------------------------- matching
@@ -465,16 +503,22 @@ def diagnose(func: str, args_list: list[tuple], outputs: list[Any]) -> Mistake |
     got = [_as_arrays(o) for o in outputs]
     if any(g is None for g in got):
         return None
-    wants = [_as_arrays(right(*a)) for a in args_list]
+    by_key = {m.key: m for m, _ in models}
     if func == "undistort_normalized":
         return _diagnose_undistort(args_list, got, models[0][0])
+    if func == "extrinsics_from_homography":
+        return by_key.get(_pose_predicates(args_list, got) or "")
+    if func == "intrinsics_from_homographies":
+        K = got[0][0]
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            return None
+        return by_key.get(_k_predicates(K.astype(float), K_PROBE) or "")
+    wants = [_as_arrays(right(*a)) for a in args_list]
     dtype = func == "rectification_maps"
     if all(_close(g, w, dtype=dtype) for g, w in zip(got, wants)):
         return None
-    if func == "estimate_homography":  # the wrong fits are modelled on the noise-free probe only
-        exact = slice(0, 1)
-    else:
-        exact = slice(None)
+    # the wrong fits of estimate_homography are modelled on the noise-free probe only
+    exact = slice(0, 1) if func == "estimate_homography" else slice(None)
     for mistake, model in models:
         if mistake.key == "not_scaled":
             if all(_same_up_to_scale(g, w) for g, w in zip(got[exact], wants[exact])):
@@ -482,16 +526,10 @@ def diagnose(func: str, args_list: list[tuple], outputs: list[Any]) -> Mistake |
             continue
         try:
             wrong = [_as_arrays(model(*a)) for a in args_list]
-        except Exception:
+        except Exception:  # a model that does not apply to these inputs
             continue
-        if func == "estimate_homography" and mistake.key == "no_normalization":
-            # noise-free data hides it; the noisy far probe shows it
+        if mistake.key == "no_normalization":  # noise-free data hides it; the noisy far probe shows it
             if _close(got[-1], wrong[-1], rtol=1e-4) and not _close(got[-1], wants[-1], rtol=1e-4):
-                return mistake
-            continue
-        if func == "extrinsics_from_homography" and mistake.key == "not_orthonormalized":
-            # only the noisy probe tells (exact homographies give a rotation already)
-            if _close(got[-1], wrong[-1], rtol=1e-4):
                 return mistake
             continue
         if all(_close(g, w, dtype=dtype) for g, w in zip(got[exact], wrong[exact])):
@@ -507,7 +545,7 @@ def _diagnose_undistort(args_list, got, mistake):
         if _close(g, [truth], rtol=1e-7):
             continue
         for n in range(1, 21):
-            if _close(g, [_fixed_point(xy_d, d, n)], rtol=1e-9):
+            if any(_close(g, [_fixed_point(xy_d, d, n, divide)], rtol=1e-9) for divide in (True, False)):
                 return mistake
         if _close(g, [_fixed_point(xy_d, d, 500)], rtol=1e-6):  # converged fixed point, stalled at the corners
             return Mistake("fixed_point_stalls", "the plain fixed-point iteration stalls at the far corners of a wide "
