@@ -36,7 +36,7 @@ def cmd_grade(args) -> int:
     if args.gradescope_bundle:
         from .bundle import write_bundle
 
-        out = write_bundle(args.gradescope_bundle, material_root=args.material)
+        out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment)
         print(f"wrote {out}: upload it as the autograder of a Gradescope programming assignment")
         return 0
     if not args.submission:
