@@ -9,12 +9,14 @@ nothing the student's process writes can run code in the grader.
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import pickle
 import select
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -179,40 +181,102 @@ def run_calls(statements: list[tuple[str, int]], checks: list[dict], *, blocked_
     return run
 
 
+class _ForkServer:
+    """One pre-imported ``child.py --serve`` process that forks a fresh process per submission
+    (saves the second that importing numpy and OpenCV costs each time). Thread-safe."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.proc: subprocess.Popen | None = None
+        self.sock: socket.socket | None = None
+
+    def _start(self) -> None:
+        ours, theirs = socket.socketpair()
+        env = {k: v for k, v in os.environ.items() if k in ("PATH", "LANG", "LC_ALL", "VIRTUAL_ENV")}
+        env.update(MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+        self.proc = subprocess.Popen([sys.executable, "-I", str(CHILD), "--serve", str(theirs.fileno())],
+                                     pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd="/",
+                                     start_new_session=True)
+        theirs.close()
+        self.sock = ours
+
+    def spawn(self, job: dict) -> tuple[int, int, int]:
+        """Start ``job``; returns (pid, control pipe read end, output pipe read end)."""
+        data = pickle.dumps(job)
+        r_ctl, w_ctl = os.pipe()
+        r_out, w_out = os.pipe()
+        try:
+            with self.lock:
+                for attempt in (0, 1):
+                    if self.proc is None or self.proc.poll() is not None:
+                        self._start()
+                    try:
+                        socket.send_fds(self.sock, [len(data).to_bytes(8, "big")], [w_ctl, w_out])
+                        self.sock.sendall(data)
+                        pid = int.from_bytes(_recv_exact(self.sock, 8), "big")
+                        break
+                    except OSError:
+                        self.close()
+                        if attempt:
+                            raise
+        finally:
+            os.close(w_ctl)
+            os.close(w_out)
+        return pid, r_ctl, r_out
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait()
+            self.proc = None
+
+
+def _recv_exact(sock: socket.socket, n: int) -> bytes:
+    buf = b""
+    while len(buf) < n:
+        chunk = sock.recv(n - len(buf))
+        if not chunk:
+            raise OSError("the fork server closed its socket")
+        buf += chunk
+    return buf
+
+
+CHILD = Path(__file__).with_name("child.py")
+_SERVER = _ForkServer()
+atexit.register(_SERVER.close)
+
+
 def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars, files) -> list[dict]:
-    """One child process; returns the checks still to run (after a crash of the child itself)."""
+    """One sandboxed process; returns the checks still to run (after a crash of the process itself)."""
     tmp = Path(tempfile.mkdtemp(prefix="dtscal-grade-"))
     work, out = tmp / "work", tmp / "work" / ".answers"
     out.mkdir(parents=True)
     for name, data in files.items():
         (work / name).write_bytes(data)
     os.chmod(tmp, 0o755)
-    r_ctl, w_ctl = os.pipe()
     job = {"statements": statements, "skip": sorted(skip), "checks": todo, "workdir": str(work),
            "outdir": str(out), "mem_mb": mem_mb, "output_limit": output_chars,
-           "blocked_paths": [str(p) for p in blocked_paths], "control_fd": w_ctl}
-    env = {k: v for k, v in os.environ.items() if k in ("PATH", "LANG", "LC_ALL", "VIRTUAL_ENV")}
-    env.update(MPLBACKEND="Agg", MPLCONFIGDIR=str(work), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    proc = subprocess.Popen([sys.executable, "-I", str(Path(__file__).with_name("child.py"))], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, pass_fds=(w_ctl,),
-                            start_new_session=True, cwd=str(work), env=env)
-    os.close(w_ctl)
+           "blocked_paths": [str(p) for p in blocked_paths]}
+    pid, r_ctl, r_out = _SERVER.spawn(job)
     sink: list[bytes] = []
-    drainer = threading.Thread(target=_drain, args=(proc.stdout, 4000, sink), daemon=True)
+    stdout = os.fdopen(r_out, "rb", buffering=0)
+    drainer = threading.Thread(target=_drain, args=(stdout, 4000, sink), daemon=True)
     drainer.start()
     remaining = list(todo)
     by_id = {c["id"]: c for c in todo}
     try:
-        proc.stdin.write(pickle.dumps(job))
-        proc.stdin.close()
         buf = b""
         current, loading = None, None
         deadline = time.monotonic() + LOAD_WALL_S
         while True:
             wait = deadline - time.monotonic()
             ready = select.select([r_ctl], [], [], max(0.0, wait))[0] if wait > 0 else []
-            if not ready:  # a deadline passed: the child itself is stuck
-                _kill(proc)
+            if not ready:  # a deadline passed: the process itself is stuck
+                _kill(pid)
                 if current is not None:
                     run.checks[current] = CheckRun(failure=_describe("wall", by_id[current]["wall"], 0, mem_mb))
                     remaining = [c for c in remaining if c["id"] != current]
@@ -221,16 +285,15 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
                     run.load_errors.append((loading, "loading this statement did not finish in time; skipped"))
                 return remaining
             chunk = os.read(r_ctl, 65536)
-            if not chunk:  # the child died
-                proc.wait(timeout=10)
+            if not chunk:  # the process died
                 if current is not None:
                     run.checks[current] = CheckRun(failure="the grading process was killed during this check")
                     remaining = [c for c in remaining if c["id"] != current]
                 elif loading is not None:
                     skip.add(loading)
-                    run.load_errors.append((loading, f"loading this statement ended the process "
-                                                     f"(exit status {proc.returncode}); skipped"))
+                    run.load_errors.append((loading, "loading this statement ended the process; skipped"))
                 elif not run.notes:
+                    time.sleep(0.2)
                     raise RuntimeError("the grading process failed to start:\n"
                                        + b"".join(sink).decode(errors="replace")[-2000:])
                 return remaining
@@ -273,18 +336,16 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
                 elif ev == "finished":
                     return remaining
     finally:
-        _kill(proc)
+        _kill(pid)
         os.close(r_ctl)
         drainer.join(timeout=2)
+        stdout.close()
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _kill(proc: subprocess.Popen) -> None:
+def _kill(pid: int) -> None:
+    """Kill a sandboxed process and everything it started (its own session)."""
     try:
-        os.killpg(proc.pid, signal.SIGKILL)
+        os.killpg(pid, signal.SIGKILL)
     except OSError:
-        pass
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
         pass
