@@ -129,9 +129,10 @@ def test_notebook_cells_and_magics(tmp_path, material):
 
 # --------------------------------------------------------------------------- academic honesty
 HONESTY = {
-    "direct": "import cv2\ndef project_points(K, R, t, X):\n    return cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K, None)[0].reshape(-1, 2)\n",
-    "from_alias": "from cv2 import projectPoints as pp\nimport cv2\n"
-                  "def project_points(K, R, t, X):\n    return pp(X, cv2.Rodrigues(R)[0], t, K, None)[0].reshape(-1, 2)\n",
+    "direct": "import cv2\ndef project_points(K, R, t, X):\n"
+              "    return cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K, None)[0].reshape(-1, 2)\n",
+    "from_alias": "from cv2 import projectPoints as pp\nimport cv2\ndef project_points(K, R, t, X):\n"
+                  "    return pp(X, cv2.Rodrigues(R)[0], t, K, None)[0].reshape(-1, 2)\n",
     "module_alias": "import cv2 as c\ndef project_points(K, R, t, X):\n"
                     "    return c.projectPoints(X, c.Rodrigues(R)[0], t, K, None)[0].reshape(-1, 2)\n",
     "getattr": "import cv2\ndef project_points(K, R, t, X):\n    f = getattr(cv2, 'projectPoints')\n"
@@ -141,7 +142,8 @@ HONESTY = {
     "kit_submodule": "import dtscal_lib.homography as h\ndef project_points(K, R, t, X):\n    return h.apply(K, X)\n",
     "local_import": "def project_points(K, R, t, X):\n    from cv2 import projectPoints\n"
                     "    return projectPoints(X, R, t, K, None)[0].reshape(-1, 2)\n",
-    "via_helper": "import cv2\ndef _cv(K, R, t, X):\n    return cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K, None)[0]\n"
+    "via_helper": "import cv2\ndef _cv(K, R, t, X):\n"
+                  "    return cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K, None)[0]\n"
                   "def project_points(K, R, t, X):\n    return _cv(K, R, t, X).reshape(-1, 2)\n",
 }
 

@@ -103,7 +103,8 @@ MISBEHAVIOURS = {
 
 
 def _submission(tmp_path, name, body, *, prefix=""):
-    src = HEAD + prefix + "\n\ndef apply_homography(H, pts):\n    pts = np.asarray(pts, dtype=float)\n" + body + ESTIMATE
+    head = "\n\ndef apply_homography(H, pts):\n    pts = np.asarray(pts, dtype=float)\n"
+    src = HEAD + prefix + head + body + ESTIMATE
     p = tmp_path / name / "02_homography.py"
     p.parent.mkdir()
     p.write_text(src)
@@ -198,6 +199,6 @@ def test_sandbox_notes_say_how_it_isolates(tmp_path):
 
     run = run_calls([("import numpy as np", 1), ("def f(x):\n    return np.asarray(x) * 2", 2)],
                     [{"id": 0, "calls": [("f", (3.0,))], "wall": 5, "cpu": 2}])
-    assert float(run.checks[0].calls[0].value) == 6.0
+    assert run.checks[0].calls[0].value.shape == () and float(run.checks[0].calls[0].value) == 6.0
     assert run.notes["network"]
     assert run.notes["user"]

@@ -184,7 +184,7 @@ def _encode(value, out: str, stem: str, np, depth: int = 0):
         except Exception:
             return {"kind": "object", "type": type(value).__name__}
     path = os.path.join(out, stem + ".npy")
-    np.save(path, np.ascontiguousarray(arr), allow_pickle=False)
+    np.save(path, arr if arr.flags.c_contiguous else arr.copy(order="C"), allow_pickle=False)
     return {"kind": "array", "file": stem + ".npy", "note": note}
 
 

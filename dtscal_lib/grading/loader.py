@@ -35,6 +35,12 @@ CV2_DENY = frozenset({
 KIT_ALLOWED = ("dtscal_lib.duckietown", "dtscal_lib.errors")
 
 
+#: imports of course plumbing (plots, widgets, the kit's checks) that exercise functions never
+#: need: skipped in the sandbox, which saves a second per submission
+SKIPPED_IMPORTS = ("matplotlib", "ipywidgets", "IPython", "tqdm", "dtscal_lib")
+ALLOWED_KIT_IMPORTS = ("dtscal_lib.duckietown", "dtscal_lib.errors")
+
+
 @dataclass
 class Submission:
     """The parsed submission: ``statements`` to run, ``functions`` defined, honesty findings."""
@@ -190,3 +196,29 @@ def forbidden_calls(fn: ast.AST, aliases: dict) -> list[str]:
                 hits.add(f"{base}.{node.args[1].value}")
     # keep the most specific names only (cv2.findHomography, not also cv2)
     return sorted(h for h in hits if not any(o != h and o.startswith(h + ".") for o in hits))
+
+
+def useful_import(src: str) -> str | None:
+    """An import statement without its course plumbing (plots, widgets, the kit's checks):
+    the statement itself, a narrower one, or None when nothing useful is left."""
+    try:
+        node = ast.parse(src).body[0]
+    except (SyntaxError, IndexError):
+        return src
+    if isinstance(node, ast.Import):
+        full = [(a, a.name) for a in node.names]
+    elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+        full = [(a, f"{node.module}.{a.name}") for a in node.names]
+    else:
+        return src
+
+    def under(m, roots):
+        return any(m == r or m.startswith(r + ".") for r in roots)
+
+    keep = [a for a, m in full if not under(m, SKIPPED_IMPORTS) or under(m, ALLOWED_KIT_IMPORTS)]
+    if len(keep) == len(full):
+        return src
+    if not keep:
+        return None
+    node.names = keep
+    return ast.unparse(node)
