@@ -8,6 +8,7 @@ Sub-commands::
     dtscal calibrate-extrinsics    one frame on the board -> camera_extrinsic/<ROBOT>.yaml
     dtscal handout OUT             write the student hand-out (alias: dtscal release OUT)
     dtscal release --check|--execute  check notebooks/ against solutions/ / re-run solutions, regenerate
+    dtscal grade SUBMISSION        grade notebooks against the hidden cases (instructor)
 
 Exit codes: 0 success, 1 a check failed, 2 bad input (the message says what to do), 3 a calibration
 was computed but refused as implausible (nothing written over the robot's file; with --keep-anyway it
@@ -314,6 +315,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--update", action="store_true",
                     help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
     sp.set_defaults(func=cmd_course)
+
+    from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
+
+    add_grade_parser(sub)
     return p
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import duckietown as dt
 from ..boards import Board, ground_points
-from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
+from . import Case, CheckFailed, Report, expect_close, expect_shape, nums, run_check
 
 __all__ = ["check_board_ground_points", "check_pixel_to_ground"]
 
@@ -29,9 +29,9 @@ def _case_ground(cols, rows, square, x0, y0, title, hint) -> Case:
         if np.allclose(np.sort(got, axis=0), np.sort(want, axis=0), atol=1e-12) and not np.allclose(got, want, atol=1e-12):
             raise CheckFailed(
                 "the right points in the wrong order: corner 0 must be the near-right corner "
-                f"{tuple(np.round(want[0], 4))}, corner 1 the next one to its LEFT "
-                f"{tuple(np.round(want[1], 4))}, then row by row away from the robot; got corners 0, 1 = "
-                f"{tuple(np.round(got[0], 4))}, {tuple(np.round(got[1], 4))}"
+                f"{nums(want[0])}, corner 1 the next one to its LEFT "
+                f"{nums(want[1])}, then row by row away from the robot; got corners 0, 1 = "
+                f"{nums(got[0])}, {nums(got[1])}"
             )
         expect_close(got, want, 1e-12, "ground points (metres)")
 
@@ -65,7 +65,7 @@ def _case_default_sanity() -> Case:
         uv = np.array([[320.0, 479.0], [320.0, 240.0]])
         got = expect_shape(fn(H.copy(), uv.copy()), (2, 2), "pixel_to_ground(H, uv)")
         if abs(got[0, 0] - 0.117) > 0.002 or abs(got[0, 1] - 0.004) > 0.002:
-            raise CheckFailed(f"pixel (320, 479) should land about (0.117, 0.004) m ahead, got {np.round(got[0], 4)}")
+            raise CheckFailed(f"pixel (320, 479) should land about (0.117, 0.004) m ahead, got {nums(got[0])}")
         if abs(got[1, 0] - 0.289) > 0.003:
             raise CheckFailed(f"pixel (320, 240) should land about x = 0.289 m ahead, got x = {got[1, 0]:.4f}")
 

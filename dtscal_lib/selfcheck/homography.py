@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
-from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
+from . import Case, CheckFailed, Report, expect_close, expect_shape, num, run_check
 from .projection import K_DUCKIE, random_pose
 
 __all__ = [
@@ -142,7 +142,7 @@ def check_estimate_homography(fn: Callable) -> Report:
     def scaled(f):
         H = _estimate(f, sq_src, sq_dst)
         if abs(H[2, 2] - 1.0) > 1e-9:
-            raise CheckFailed(f"H[2, 2] should be 1, got {H[2, 2]!r}")
+            raise CheckFailed(f"H[2, 2] should be 1, got {num(H[2, 2])}")
 
     def exact_board(f):
         dst = _opencv_apply(H_board, board)

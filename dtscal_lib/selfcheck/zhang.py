@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
-from ..camera import intrinsic_matrix
 from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
+from .projection import K_DUCKIE, K_SKEWED
 
 __all__ = [
     "check_intrinsic_constraints",
@@ -29,10 +29,8 @@ __all__ = [
     "b_vector",
 ]
 
-#: a Duckiebot-like camera with a visible skew, so a solution that assumes s = 0 is caught
-K_SKEWED = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=4.5)
-#: a Duckiebot-like camera without skew (what real calibrations look like)
-K_DUCKIE = intrinsic_matrix(307.7, 315.0, 329.7, 244.5)
+# the test cameras K_SKEWED (visible skew: catches code assuming s = 0) and K_DUCKIE (none, as real
+# calibrations) are defined once, in projection.py, for every self-check
 
 
 # --------------------------------------------------------------------------- ground truth

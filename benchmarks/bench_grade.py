@@ -1,0 +1,102 @@
+"""Benchmark: the autograder on one notebook and on a whole class.
+
+1. One notebook: ``dtscal grade`` on the solution of notebook 04 (the heaviest: three
+   functions, 640x480 rectification maps), end to end as an instructor runs it (process
+   start, grading material, references, sandbox). Target: < 10 s wall.
+2. A class of 60 students x 5 notebooks (300 submissions) with ``--jobs 2``. Each
+   student's notebook is drawn (seeded) from the solution (55 %), a buggy implementation of
+   the test corpus (35 %) or the untouched student notebook (10 %). Target: < 5 min wall.
+3. Baseline, measured in the same run: ``--jobs 1`` against ``--jobs 2`` on the first
+   10 students (50 submissions); the ratio says what the second process buys.
+
+Run::
+
+    .venv/bin/python benchmarks/bench_grade.py [--students 60] [--subset 10] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = ROOT / "tests" / "grading_corpus"
+ASSIGNMENTS = ("01_pinhole_projection", "02_homography", "03_intrinsic_calibration",
+               "04_distortion_rectification", "05_extrinsic_calibration")
+
+
+def make_class(folder: Path, students: int, seed: int = 9) -> int:
+    rng = random.Random(seed)
+    n = 0
+    for s in range(students):
+        d = folder / f"student{s:03d}"
+        d.mkdir(parents=True)
+        for a in ASSIGNMENTS:
+            r = rng.random()
+            if r < 0.55:
+                shutil.copy(ROOT / "solutions" / f"{a}.ipynb", d / f"{a}.ipynb")
+            elif r < 0.90:
+                shutil.copy(rng.choice(sorted(CORPUS.glob(f"{a}__*.py"))), d / f"{a}.py")
+            else:
+                shutil.copy(ROOT / "notebooks" / f"{a}.ipynb", d / f"{a}.ipynb")
+            n += 1
+    return n
+
+
+def grade(target: Path, jobs: int, out: Path) -> float:
+    t0 = time.perf_counter()
+    run = subprocess.run([sys.executable, "-m", "dtscal_lib.cli", "grade", str(target), "--jobs", str(jobs),
+                          "--csv", str(out / f"summary_{target.name}_{jobs}.csv"), "-q"],
+                         cwd=ROOT, capture_output=True, text=True)
+    took = time.perf_counter() - t0
+    if run.returncode != 0:
+        sys.exit(f"dtscal grade failed:\n{run.stderr[-2000:]}")
+    return took
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--students", type=int, default=60)
+    ap.add_argument("--subset", type=int, default=10, help="students in the jobs 1 vs 2 comparison")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench-grade-"))
+    try:
+        one = grade(ROOT / "solutions" / "04_distortion_rectification.ipynb", 1, tmp)
+        cls = tmp / "class"
+        n = make_class(cls, args.students)
+        full = grade(cls, 2, tmp)
+        sub = tmp / "subset"
+        sub.mkdir()
+        for d in sorted(cls.iterdir())[: args.subset]:
+            shutil.copytree(d, sub / d.name)
+        n_sub = sum(1 for _ in sub.rglob("0*"))
+        serial = grade(sub, 1, tmp)
+        parallel = grade(sub, 2, tmp)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    res = {"one_notebook_s": round(one, 2), "class_submissions": n, "class_jobs2_s": round(full, 1),
+           "class_per_submission_s": round(full / n, 3), "subset_submissions": n_sub,
+           "subset_jobs1_s": round(serial, 1), "subset_jobs2_s": round(parallel, 1),
+           "speedup_jobs2_vs_jobs1": round(serial / parallel, 2)}
+    if args.json:
+        print(json.dumps(res))
+    else:
+        print(f"one notebook (04, solution), end to end: {one:.2f} s   (target < 10 s)")
+        print(f"class of {args.students} students, {n} submissions, --jobs 2: {full:.1f} s "
+              f"({full / n:.2f} s per submission; target < 300 s)")
+        print(f"subset of {n_sub} submissions: --jobs 1 {serial:.1f} s, --jobs 2 {parallel:.1f} s: "
+              f"{serial / parallel:.2f}x faster with 2 processes")
+    ok = one < 10 and full < 300
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

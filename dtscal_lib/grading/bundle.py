@@ -1,0 +1,102 @@
+"""The Gradescope autograder zip: ``dtscal grade --gradescope-bundle OUT.zip``.
+
+Gradescope unpacks the zip into ``/autograder/source``, runs ``setup.sh`` once when the
+image is built, then ``run_autograder`` for every submission: the student's files are in
+``/autograder/submission`` and the grades go to ``/autograder/results/results.json``.
+
+The zip holds the kit's library, the hidden cases (``grading/``) and the solution notebooks
+(references). ``setup.sh`` installs the library into a virtual environment and makes
+``grading/`` and ``solutions/`` readable by root only; the sandbox runs student code as
+user ``nobody``. ``run_autograder`` always writes a results file, even if grading fails.
+For a local test, ``DTSCAL_AUTOGRADER_ROOT`` replaces ``/autograder`` and ``DTSCAL_PYTHON``
+the virtual environment's Python.
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from pathlib import Path
+
+from ..errors import DtscalError
+from .material import find_material
+
+SETUP_SH = """#!/usr/bin/env bash
+# Gradescope runs this once, as root, when it builds the autograder image.
+set -euo pipefail
+SRC="$(cd "$(dirname "$0")" && pwd)"
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq python3 python3-venv python3-pip >/dev/null
+python3 -m venv /autograder/venv
+/autograder/venv/bin/pip install --quiet --upgrade pip
+/autograder/venv/bin/pip install --quiet "$SRC"
+# the hidden cases and the references: readable by root (the grader) only
+chmod -R go-rwx "$SRC/grading" "$SRC/solutions"
+"""
+
+RUN_AUTOGRADER = """#!/usr/bin/env bash
+# Gradescope runs this for every submission. It always leaves a results.json.
+ROOT="${{DTSCAL_AUTOGRADER_ROOT:-/autograder}}"
+PY="${{DTSCAL_PYTHON:-$ROOT/venv/bin/python}}"
+RESULTS="$ROOT/results/results.json"
+mkdir -p "$ROOT/results"
+rm -f "$RESULTS"
+"$PY" -m dtscal_lib.cli grade "$ROOT/submission" --material "$ROOT/source" --json "$RESULTS" {assignment}-q \\
+    > "$ROOT/results/grade.log" 2>&1
+status=$?
+if [ ! -s "$RESULTS" ]; then
+  "$PY" - "$RESULTS" "$ROOT/results/grade.log" <<'EOF'
+import json, sys
+log = open(sys.argv[2], errors="replace").read()[-1500:]
+msg = ("The autograder could not grade this submission. Upload your notebook(s) under their course names "
+       "(for example 01_pinhole_projection.ipynb).\\n" + log)
+json.dump({{"score": 0, "output": msg, "tests": []}}, open(sys.argv[1], "w"))
+EOF
+fi
+exit 0
+"""
+
+#: what the bundle holds of the kit, besides the two scripts
+TREES = ("dtscal_lib", "grading")
+FILES = ("pyproject.toml", "README.md", "LICENSE")
+
+
+def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> Path:
+    """Write the Gradescope autograder zip; returns its path.
+
+    Parameters
+    ----------
+    out_zip : path of the zip to write
+    material_root : the kit with ``grading/`` and ``solutions/`` (default: this kit)
+    assignment : grade every upload as this assignment (default: from the file names)
+    """
+    root = find_material(material_root)
+    out = Path(out_zip)
+    if out.suffix != ".zip":
+        raise DtscalError(f"{out} should end in .zip (Gradescope takes a zip file)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    flag = f"--assignment {assignment} " if assignment else ""
+    tmp = out.with_name(out.name + ".part")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        _add_text(z, "setup.sh", SETUP_SH)
+        _add_text(z, "run_autograder", RUN_AUTOGRADER.format(assignment=flag))
+        for tree in TREES:
+            for p in sorted((root / tree).rglob("*")):
+                rel = p.relative_to(root)
+                if p.is_file() and "__pycache__" not in rel.parts and p.suffix not in (".pyc", ".pyo"):
+                    z.write(p, rel.as_posix())
+        for nb in sorted((root / "solutions").glob("*.ipynb")):
+            z.write(nb, f"solutions/{nb.name}")
+        for f in FILES:
+            if (root / f).is_file():
+                z.write(root / f, f)
+    os.replace(tmp, out)
+    return out
+
+
+def _add_text(z: zipfile.ZipFile, name: str, text: str) -> None:
+    info = zipfile.ZipInfo(name)
+    info.external_attr = 0o755 << 16
+    info.compress_type = zipfile.ZIP_DEFLATED
+    z.writestr(info, text)

@@ -1,0 +1,224 @@
+"""Read a submission: its import and ``def`` statements only, and what they call.
+
+A submission is a notebook (every code cell is read) or a Python file. The source is only
+*parsed* here, in the grader; nothing runs. Top-level code other than imports and function
+definitions (plots, widgets, long loops, ``sys.exit()``) is dropped, so it never runs; the
+kept statements run later inside the sandbox (:mod:`dtscal_lib.grading.child`).
+
+The academic-honesty rule is checked here too, on the syntax tree: an exercise function
+that calls a routine solving the exercise for the student (an OpenCV routine or the kit's
+own library), directly, through an alias (``import cv2 as c``, ``from cv2 import
+findHomography as fh``, ``import dtscal_lib.homography as h``) or through ``getattr`` with
+a constant name, gets no credit for that function.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import DtscalError
+
+#: OpenCV routines that solve an exercise (or most of one)
+CV2_DENY = frozenset({
+    "findHomography", "getPerspectiveTransform", "perspectiveTransform", "warpPerspective",
+    "calibrateCamera", "calibrateCameraExtended", "calibrateCameraRO", "initCameraMatrix2D", "projectPoints",
+    "undistortPoints", "undistortPointsIter", "undistortImagePoints", "initUndistortRectifyMap", "undistort",
+    "getOptimalNewCameraMatrix", "solvePnP", "solvePnPGeneric", "solvePnPRansac", "decomposeHomographyMat",
+    "convertPointsFromHomogeneous", "convertPointsToHomogeneous", "fisheye",
+})
+#: the kit's library ships with the student course and holds exercise computations
+#: (``camera``, ``calibration``, ``ground``, ``homography``, ``course``, ``boards``...): an exercise
+#: function may use none of it but these facts and errors
+KIT_ALLOWED = ("dtscal_lib.duckietown", "dtscal_lib.errors")
+
+
+#: imports of course plumbing (plots, widgets, the kit's checks) that exercise functions never
+#: need: skipped in the sandbox, which saves a second per submission
+SKIPPED_IMPORTS = ("matplotlib", "ipywidgets", "IPython", "tqdm", "dtscal_lib")
+ALLOWED_KIT_IMPORTS = ("dtscal_lib.duckietown", "dtscal_lib.errors")
+
+
+@dataclass
+class Submission:
+    """The parsed submission: ``statements`` to run, ``functions`` defined, honesty findings."""
+
+    path: Path
+    statements: list[tuple[str, int]] = field(default_factory=list)
+    functions: dict[str, ast.FunctionDef] = field(default_factory=dict)
+    stubs: set[str] = field(default_factory=set)
+    forbidden: dict[str, list[str]] = field(default_factory=dict)
+    dropped: int = 0
+    syntax_errors: list[str] = field(default_factory=list)
+
+
+def _magic_free(src: str) -> str:
+    return "\n".join(("# " + ln) if ln.lstrip().startswith(("%", "!")) else ln for ln in src.split("\n"))
+
+
+def read_cells(path: Path) -> list[tuple[str, int]]:
+    """Code of a submission as ``(source, first line)`` blocks (one per notebook code cell)."""
+    if path.suffix == ".py":
+        return [(path.read_text(encoding="utf-8", errors="replace"), 1)]
+    try:
+        nb = json.loads(path.read_text(encoding="utf-8", errors="replace"))
+        cells = nb["cells"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise DtscalError(f"{path} is not a readable notebook ({exc}); hand in the .ipynb file Jupyter saved") \
+            from None
+    blocks, line = [], 1
+    for cell in cells:
+        if not isinstance(cell, dict) or cell.get("cell_type") != "code":
+            continue
+        src = cell.get("source", "")
+        src = "".join(src) if isinstance(src, list) else str(src)
+        blocks.append((_magic_free(src), line))
+        line += src.count("\n") + 2
+    return blocks
+
+
+def _is_stub(fn: ast.FunctionDef) -> bool:
+    body = [s for s in fn.body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+    if len(body) != 1 or not isinstance(body[0], ast.Raise) or body[0].exc is None:
+        return False
+    exc = body[0].exc
+    exc = exc.func if isinstance(exc, ast.Call) else exc
+    return isinstance(exc, ast.Name) and exc.id == "NotImplementedError"
+
+
+def load_submission(path) -> Submission:
+    """Parse ``path`` (.ipynb or .py) into a :class:`Submission`; runs nothing."""
+    path = Path(path)
+    sub = Submission(path)
+    aliases: dict[str, str] = {}  # local name -> dotted origin ("cv2", "cv2.findHomography", ...)
+    for src, first in read_cells(path):
+        try:
+            tree = ast.parse(src)
+        except SyntaxError as exc:
+            sub.syntax_errors.append(f"line {first + (exc.lineno or 1) - 1}: {exc.msg}")
+            continue
+        for node in tree.body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                _record_aliases(node, aliases)
+            elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                sub.functions[node.name] = node
+                if _is_stub(node):
+                    sub.stubs.add(node.name)
+                else:
+                    sub.stubs.discard(node.name)
+            else:
+                sub.dropped += 1
+                continue
+            seg = ast.get_source_segment(src, node, padded=False)
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.decorator_list:
+                seg = "\n".join(src.split("\n")[node.decorator_list[0].lineno - 1: node.end_lineno])
+                start = node.decorator_list[0].lineno
+            else:
+                start = node.lineno
+            sub.statements.append((seg, first + start - 1))
+    direct = {name: forbidden_calls(fn, aliases) for name, fn in sub.functions.items()}
+    for name, fn in sub.functions.items():  # through the submission's own helpers, at any depth
+        hits, seen, todo = set(direct[name]), {name}, [name]
+        while todo:
+            for callee in _called_names(sub.functions[todo.pop()]):
+                if callee in sub.functions and callee not in seen:
+                    seen.add(callee)
+                    todo.append(callee)
+                    hits.update(f"{h} (through {callee})" for h in direct[callee])
+        if hits:
+            sub.forbidden[name] = sorted(hits)
+    return sub
+
+
+def _called_names(fn: ast.AST) -> set[str]:
+    return {n.id for n in ast.walk(fn) if isinstance(n, ast.Name)}
+
+
+def _record_aliases(node, aliases: dict) -> None:
+    if isinstance(node, ast.Import):
+        for a in node.names:
+            if a.asname:
+                aliases[a.asname] = a.name
+            else:
+                aliases[a.name.split(".")[0]] = a.name.split(".")[0]
+    else:
+        mod = node.module or ""
+        for a in node.names:
+            aliases[a.asname or a.name] = f"{mod}.{a.name}" if mod else a.name
+
+
+def _dotted(node, aliases: dict) -> str | None:
+    """``cv2.findHomography`` for ``c.findHomography`` when ``import cv2 as c``; None if not a name chain."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "__import__" \
+            and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str):
+        base = node.args[0].value
+    elif isinstance(node, ast.Name):
+        base = aliases.get(node.id, node.id)
+    else:
+        return None
+    return ".".join([base, *reversed(parts)])
+
+
+def _denied(name: str | None) -> bool:
+    if not name:
+        return False
+    parts = name.split(".")
+    if parts[0] == "cv2":
+        return len(parts) > 1 and parts[1] in CV2_DENY
+    if parts[0] == "dtscal_lib" and len(parts) > 1:
+        return not any(name == m or name.startswith(m + ".") for m in KIT_ALLOWED)
+    return False
+
+
+def forbidden_calls(fn: ast.AST, aliases: dict) -> list[str]:
+    """Names of solving routines that ``fn`` uses (calls, or takes via getattr), sorted."""
+    local = dict(aliases)
+    for node in ast.walk(fn):  # imports inside the function count too
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            _record_aliases(node, local)
+    hits = set()
+    for node in ast.walk(fn):
+        if isinstance(node, (ast.Attribute, ast.Name)):
+            name = _dotted(node, local)
+            if name and _denied(name) and name.count(".") >= 1:
+                hits.add(name)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "getattr" \
+                and len(node.args) >= 2 and isinstance(node.args[1], ast.Constant) \
+                and isinstance(node.args[1].value, str):
+            base = _dotted(node.args[0], local)
+            if base and _denied(f"{base}.{node.args[1].value}"):
+                hits.add(f"{base}.{node.args[1].value}")
+    # keep the most specific names only (cv2.findHomography, not also cv2)
+    return sorted(h for h in hits if not any(o != h and o.startswith(h + ".") for o in hits))
+
+
+def useful_import(src: str) -> str | None:
+    """An import statement without its course plumbing (plots, widgets, the kit's checks):
+    the statement itself, a narrower one, or None when nothing useful is left."""
+    try:
+        node = ast.parse(src).body[0]
+    except (SyntaxError, IndexError):
+        return src
+    if isinstance(node, ast.Import):
+        full = [(a, a.name) for a in node.names]
+    elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+        full = [(a, f"{node.module}.{a.name}") for a in node.names]
+    else:
+        return src
+
+    def under(m, roots):
+        return any(m == r or m.startswith(r + ".") for r in roots)
+
+    keep = [a for a, m in full if not under(m, SKIPPED_IMPORTS) or under(m, ALLOWED_KIT_IMPORTS)]
+    if len(keep) == len(full):
+        return src
+    if not keep:
+        return None
+    node.names = keep
+    return ast.unparse(node)

@@ -1,0 +1,114 @@
+"""Hidden grading cases of the dtscal course (instructor only; never handed out).
+
+`dtscal grade` reads this file. `dtscal handout` / `dtscal release` leave the whole
+`grading/` folder out, and a test scans the hand-out for these seeds.
+
+Each check: `name` (shown to the student), `weight` (points), `seed` (inputs are drawn
+from it), `judge` (close | unchanged | dtype | raises | transfer | scaled | pose) and
+the input parameters of its function (see dtscal_lib/grading/checks.py). Change the
+seeds each term: the answers are recomputed from the solution notebooks.
+"""
+
+POINTS_PER_FUNCTION = 10
+
+CHECKS = {
+    "project_points": [
+        dict(name="noise-free pixels, skewed camera, 5 poses", weight=3, seed=640173, views=5, n=30,
+             camera="skewed", atol=1e-6, rtol=0.0),
+        dict(name="pixel coordinates in the thousands (a 4K camera)", weight=2, seed=640179, views=3, n=30,
+             camera="4k", atol=1e-5, rtol=0.0),
+        dict(name="points far away (20-60 m)", weight=1, seed=640181, views=2, n=10, depth=(20.0, 60.0),
+             camera="duckie", atol=1e-6, rtol=0.0),
+        dict(name="a single point (N = 1)", weight=1, seed=640187, views=2, n=1, atol=1e-6, rtol=0.0),
+        dict(name="returns float64 (N, 2)", weight=1, seed=640189, views=1, n=13, judge="dtype"),
+        dict(name="inputs not modified", weight=2, seed=640193, views=1, n=9, judge="unchanged"),
+    ],
+    "apply_homography": [
+        dict(name="board homographies at random scale and sign", weight=4, seed=640211, views=4, n=25,
+             random_scale=True, atol=1e-9, rtol=1e-9),
+        dict(name="pixel coordinates in the thousands", weight=2, seed=640223, views=2, n=20, camera="4k",
+             atol=0.0, rtol=1e-9),
+        dict(name="a single point (N = 1)", weight=1, seed=640229, views=2, n=1, atol=1e-9, rtol=1e-9),
+        dict(name="returns float64 (N, 2)", weight=1, seed=640231, views=1, n=6, judge="dtype"),
+        dict(name="inputs not modified", weight=2, seed=640237, views=1, n=8, judge="unchanged"),
+    ],
+    "estimate_homography": [
+        dict(name="4 exact correspondences (minimal input)", weight=2, seed=640247, views=3, n=4,
+             atol=0.0, rtol=1e-6),
+        dict(name="noise-free correspondences", weight=2, seed=640249, views=3, n=30, atol=0.0, rtol=1e-7),
+        dict(name="noisy pixels (0.7 px): transfer error within 1 % of the reference fit", weight=2,
+             seed=640253, views=3, n=40, sigma=0.7, judge="transfer", tol=0.01),
+        dict(name="conditioning: noisy coordinates near 20000", weight=2, seed=640259, views=2, n=40,
+             sigma=1.0, offset=2.0e4, span=3.0, judge="transfer", tol=0.01),
+        dict(name="H[2, 2] = 1", weight=1, seed=640261, views=1, n=12, judge="scaled"),
+        dict(name="inputs not modified", weight=1, seed=640267, views=1, n=10, judge="unchanged"),
+    ],
+    "intrinsic_constraints": [
+        dict(name="random homographies", weight=5, seed=640271, views=3, random_H=True, atol=0.0, rtol=1e-10),
+        dict(name="board homographies of a skewed camera", weight=3, seed=640277, views=3, atol=0.0,
+             rtol=1e-10),
+        dict(name="returns float64 (2, 6)", weight=1, seed=640279, views=1, judge="dtype"),
+        dict(name="inputs not modified", weight=1, seed=640283, views=1, judge="unchanged"),
+    ],
+    "intrinsics_from_homographies": [
+        dict(name="3 exact views (minimal input), skewed camera", weight=3, seed=640289, views=3, atol=0.0,
+             rtol=1e-6),
+        dict(name="15 exact views at random scale and sign", weight=2, seed=640291, views=15, random_scale=True,
+             atol=0.0, rtol=1e-6),
+        dict(name="12 noisy views (0.3 px)", weight=2, seed=640297, views=12, sigma=0.3, camera="duckie",
+             atol=0.0, rtol=2e-3),
+        dict(name="fewer than 3 views must raise ValueError", weight=1, seed=640301, views=2, judge="raises"),
+        dict(name="a single view must raise ValueError", weight=1, seed=640302, views=1, judge="raises"),
+        dict(name="returns float64 (3, 3)", weight=1, seed=640303, views=4, judge="dtype"),
+    ],
+    "extrinsics_from_homography": [
+        dict(name="exact poses from homographies at random scale and sign", weight=4, seed=640307, views=4,
+             random_scale=True, atol=1e-8, rtol=1e-8),
+        dict(name="noisy homographies (0.5 px): a proper rotation near the reference pose", weight=4,
+             seed=640319, views=4, sigma=0.5, camera="duckie", judge="pose", max_deg=0.5, t_rel=0.01),
+        dict(name="inputs not modified", weight=2, seed=640321, views=1, judge="unchanged"),
+    ],
+    "distort_normalized": [
+        dict(name="tangential lens", weight=3, seed=640327, n=40, lens="tangential", atol=1e-10, rtol=0.0),
+        dict(name="radial lens with k3", weight=3, seed=640333, n=40, lens="radial_k3", atol=1e-10, rtol=0.0),
+        dict(name="the Duckiebot lens over the whole image", weight=2, seed=640339, lens="duckiebot",
+             region="image", atol=1e-10, rtol=0.0),
+        dict(name="returns float64 (N, 2)", weight=1, seed=640343, n=7, judge="dtype"),
+        dict(name="inputs not modified", weight=1, seed=640349, n=7, judge="unchanged"),
+    ],
+    "undistort_normalized": [
+        dict(name="mild tangential lens", weight=3, seed=640351, n=40, lens="tangential", radius=0.6,
+             atol=1e-8, rtol=0.0),
+        dict(name="the Duckiebot lens over the whole image, corners included", weight=4, seed=640357,
+             lens="duckiebot", region="image", atol=1e-8, rtol=0.0),
+        dict(name="no distortion", weight=1, seed=640363, n=10, lens="none", atol=1e-12, rtol=0.0),
+        dict(name="inputs not modified", weight=2, seed=640369, n=10, lens="tangential", radius=0.5,
+             judge="unchanged"),
+    ],
+    "rectification_maps": [
+        dict(name="the Duckiebot, ROS's new camera matrix (alpha = 0)", weight=3, seed=640373, alpha=0.0,
+             atol=0.01, rtol=0.0),
+        dict(name="a 352x208 lens with tangential terms, alpha = 0.7", weight=3, seed=640379,
+             K=(181.0, 178.0, 170.0, 101.0), lens="tangential", size=(352, 208), alpha=0.7, atol=0.01, rtol=0.0),
+        dict(name="no distortion and new_K = K: the identity map", weight=1, seed=640381, lens="none",
+             size=(160, 120), K=(150.0, 150.0, 80.0, 60.0), atol=0.01, rtol=0.0),
+        dict(name="maps are float32 arrays of shape (height, width)", weight=3, seed=640387, lens="tangential",
+             size=(96, 64), K=(90.0, 90.0, 48.0, 32.0), judge="dtype", dtype="float32"),
+    ],
+    "board_ground_points": [
+        dict(name="the Duckietown board in its calibration place", weight=4, seed=640389,
+             boards=[(7, 5, 0.031, 0.191, -0.093)], atol=1e-12, rtol=0.0),
+        dict(name="other boards (cols and rows differ)", weight=4, seed=640393,
+             boards=[(4, 3, 0.05, 0.3, -0.2), (3, 6, 0.02, 0.1, 0.05), (9, 2, 0.025, 0.15, -0.11)],
+             atol=1e-12, rtol=0.0),
+        dict(name="returns float64 (N, 2)", weight=2, seed=640399, boards=[(5, 4, 0.03, 0.2, -0.06)],
+             judge="dtype"),
+    ],
+    "pixel_to_ground": [
+        dict(name="ground homographies", weight=4, seed=640403, views=3, n=25, atol=1e-9, rtol=1e-9),
+        dict(name="the same homographies at random scale and sign", weight=3, seed=640409, views=3, n=25,
+             random_scale=True, atol=1e-9, rtol=1e-9),
+        dict(name="returns float64 (N, 2)", weight=1, seed=640411, views=1, n=5, judge="dtype"),
+        dict(name="inputs not modified", weight=2, seed=640417, views=1, n=5, judge="unchanged"),
+    ],
+}

@@ -1,0 +1,11 @@
+# Corpus of plausible student mistakes for tests/test_grading_corpus.py.
+# mistake: no_division
+# expect: no perspective division
+
+import numpy as np
+
+
+def project_points(K, R, t, X):
+    X = np.asarray(X, dtype=float)
+    x = (X @ R.T + t) @ K.T
+    return x[:, :2]

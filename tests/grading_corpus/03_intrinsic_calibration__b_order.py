@@ -1,0 +1,17 @@
+# Corpus of plausible student mistakes for tests/test_grading_corpus.py.
+# mistake: b_order
+# expect: b's elements in the wrong order
+
+import numpy as np
+
+
+def intrinsic_constraints(H):
+    H = np.asarray(H, dtype=float)
+
+    def v(i, j):
+        hi, hj = H[:, i], H[:, j]
+        # b = (B11, B12, B13, B22, B23, B33)
+        return np.array([hi[0] * hj[0], hi[0] * hj[1] + hi[1] * hj[0], hi[2] * hj[0] + hi[0] * hj[2],
+                         hi[1] * hj[1], hi[2] * hj[1] + hi[1] * hj[2], hi[2] * hj[2]])
+
+    return np.vstack([v(0, 1), v(0, 0) - v(1, 1)])

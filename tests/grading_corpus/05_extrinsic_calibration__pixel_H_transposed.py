@@ -1,0 +1,12 @@
+# Corpus of plausible student mistakes for tests/test_grading_corpus.py.
+# mistake: H_transposed
+# expect: H is transposed in pixel_to_ground
+
+import numpy as np
+
+
+def pixel_to_ground(H, uv):
+    uv = np.asarray(uv, dtype=float)
+    H = np.asarray(H, dtype=float)
+    p = np.column_stack([uv, np.ones(len(uv))]) @ H
+    return p[:, :2] / p[:, 2:]
