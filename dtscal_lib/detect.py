@@ -383,8 +383,8 @@ WINDOW_MARGIN_PX = 1.5
 #: smallest window half-size, pixels (smaller windows cannot pull in a start a pixel or two off on blurred
 #: small boards)
 MIN_WINDOW = 4
-#: stopping rule of the kit's refinement: 40 iterations or a step below 0.005 px (ROS: 30, 0.1 px)
-REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 0.005)
+#: stopping rule of the kit's refinement: 30 iterations or a step below 0.01 px (ROS: 30, 0.1 px)
+REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
 #: a corner farther than this from the local homography of its neighbours (in pixels, or this
 #: fraction of its local square size, whichever is larger) disagrees with the grid
 GRID_TOLERANCE_PX = 0.75
@@ -536,7 +536,7 @@ def _local_homography(c: np.ndarray, board: Board, reach: int, exclude: np.ndarr
     r1 = np.stack([x, y, one, zero, zero, zero, -u * x, -u * y, -u], axis=-1)
     r2 = np.stack([zero, zero, zero, x, y, one, -v * x, -v * y, -v], axis=-1)
     A = np.concatenate([r1, r2], axis=1) * np.concatenate([valid, valid], axis=1)[..., None]
-    h = np.linalg.svd(A)[2][:, -1, :]
+    h = np.linalg.eigh(np.einsum("nki,nkj->nij", A, A))[1][:, :, 0]  # least-squares null vector
     # evaluate at the corner's own index, offset (0, 0)
     w = h[:, 8:9]
     ok = np.abs(w[:, 0]) > 1e-12
@@ -576,16 +576,19 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     half = np.maximum(MIN_WINDOW, radius // 2)
     square = _local_square(raw, board)
     c = _subpix(gray, raw, radius)
-    # the outer ring's windows are small and cannot pull in a start a few pixels off: start them
-    # also from where the refined inner corners put them, and keep the answer nearer to that
+    # the outer ring's windows are small and cannot pull in a start a few pixels off: where one
+    # ended far from where the refined inner corners put it, start it again from there and keep
+    # the answer that fits a corner better (corner_misfit)
     outer = _outer_ring(board)
     if outer.any() and (~outer).sum() >= 4:
         pred, _, n = _local_homography(c, board, 2, outer)
         use = outer & (n >= 4) & np.all(np.isfinite(pred), axis=1)
+        use[use] = np.linalg.norm(c[use] - pred[use], axis=1) > np.maximum(1.0, 0.25 * radius[use])
         if use.any():
             alt = _subpix(gray, pred[use], radius[use])
-            better = corner_misfit(gray, alt, radius[use]) < corner_misfit(gray, c[use], radius[use])
-            idx = np.flatnonzero(use)[better]
+            idx = np.flatnonzero(use)
+            better = corner_misfit(gray, alt, radius[idx]) < corner_misfit(gray, c[idx], radius[idx])
+            idx = idx[better]
             c[idx] = alt[better]
             raw = raw.copy()
             raw[idx] = pred[idx]  # the start that was used
@@ -622,19 +625,23 @@ def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     -------
     (M,) float64
     """
-    out = np.ones(len(points))
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    radius = np.asarray(radius, dtype=int).reshape(-1)
+    out = np.ones(len(pts))
     img = gray.astype(np.float32)
-    for k, (pt, r) in enumerate(zip(np.asarray(points, dtype=np.float64), np.asarray(radius))):
+    for r in np.unique(radius):
+        sel = np.flatnonzero(radius == r)
         n = 2 * int(r) + 3
-        patch = cv2.getRectSubPix(img, (n, n), (float(pt[0]), float(pt[1]))).astype(np.float64)
-        gy, gx = np.gradient(patch)
+        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
+        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
         d = np.arange(n) - (n - 1) / 2.0
         px, py = np.meshgrid(d, d)
         keep = (np.hypot(px, py) >= 1.0)[1:-1, 1:-1]
-        gx, gy, px, py = (a[1:-1, 1:-1][keep] for a in (gx, gy, px, py))
-        num = np.sum((gx * px + gy * py) ** 2)
-        den = np.sum((gx * gx + gy * gy) * (px * px + py * py))
-        out[k] = num / den if den > 0 else 1.0
+        gx, gy = gx[:, 1:-1, 1:-1][:, keep], gy[:, 1:-1, 1:-1][:, keep]
+        px, py = px[1:-1, 1:-1][keep], py[1:-1, 1:-1][keep]
+        num = np.sum((gx * px + gy * py) ** 2, axis=1)
+        den = np.sum((gx * gx + gy * gy) * (px * px + py * py), axis=1)
+        out[sel] = np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
     return out
 
 
