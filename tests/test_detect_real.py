@@ -84,7 +84,7 @@ def kit_calibration(side: str) -> dict:
     out = subprocess.run(
         [sys.executable, "-m", "dtscal_lib.cli", "calibrate-intrinsics", "--source", str(REAL / side),
          "--board", "9x6", "--square", str(SQUARE), "--no-write", "--json", "-q"],
-        capture_output=True, text=True, timeout=600)
+        capture_output=True, text=True, timeout=600, check=False)
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
     K = d["K"]
@@ -104,8 +104,8 @@ def _describe(name: str, c: dict) -> str:
 
 
 def test_the_kit_uses_every_real_view(compared):
-    side, kit, ref = compared
-    assert kit["views"] == 13, _describe("kit", kit)
+    side, kit, _ = compared
+    assert kit["views"] == 13, f"{side}: " + _describe("kit", kit)
 
 
 @pytest.mark.parametrize("reference", ["clean", "sb"])
