@@ -24,12 +24,17 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
 3. **Classic detection on the candidate region only**: ``findChessboardCorners`` on the
    cluster's bounding box plus a margin (ROS's flags without ``FAST_CHECK``, whose quick
    test rejects many tightly cropped boards; small regions are tried again at twice the
-   size), then ``cornerSubPix`` on the full image with ROS's window rule (half the
-   smallest corner spacing, at least 2 px).
-4. **A guard on the refinement**: on tiny or strongly foreshortened boards ``cornerSubPix``
-   can wander several pixels off. A corner that left its search window, or that lies
-   off a smooth (cubic) grid through the other corners, goes back to the detector's
-   position; if the grid still is not smooth the detection is dropped.
+   size).
+4. **Sub-pixel refinement that stays inside each corner's own squares**
+   (:func:`refine_corners_checked`). ROS refines every corner with one ``cornerSubPix``
+   window of half the smallest corner spacing; on real boards (outer squares cut narrow,
+   a printed outline, the board's edge or clutter close by) that window reaches past the
+   corner's four squares and the outer corners converge on the edge, pixels away. Here each
+   corner gets its own window (:func:`corner_windows`), the outer ring is restarted from the
+   inner corners' local homography where it disagrees, each inner corner is checked against
+   its 8 neighbours' homography (:func:`grid_disagreement`; re-refined with half the window,
+   or the view is rejected as ``"inconsistent_grid"``), and a corner off a smooth (cubic)
+   grid through the others goes back to the detector's position or is dropped with the view.
 
 A frame without any candidate costs only steps 1-2 (about 1.5-3 ms at 640x480); see
 ``benchmarks/bench_detect.py`` for the measured figures and ratios against the ROS call,
@@ -782,7 +787,7 @@ def detect_board(image, board: Board = DUCKIETOWN_BOARD, *,
 
     Saddle-point clusters (:func:`board_regions`) select at most two candidate regions;
     OpenCV's classic detector with ROS's flags runs only there; corners are ordered
-    (:func:`order_corners`) and refined (:func:`refine_corners`) on the full image.
+    (:func:`order_corners`) and refined (:func:`refine_corners_checked`) on the full image.
 
     Parameters
     ----------
@@ -823,7 +828,8 @@ def detect_board_ros(image, board: Board = DUCKIETOWN_BOARD, *,
     """The ROS ``camera_calibration`` baseline: the classic detector on the full frame.
 
     ``findChessboardCorners(ADAPTIVE_THRESH | NORMALIZE_IMAGE | FAST_CHECK)`` on the whole
-    image, then the same ordering, ``cornerSubPix`` and border rule as :func:`detect_board`.
+    image, then the same ordering and border rule as :func:`detect_board` and ROS's refinement
+    (one ``cornerSubPix`` window of :func:`subpix_radius` for all corners, no checks).
     Kept as the reference for benchmarks and tests; can take hundreds of milliseconds on a
     cluttered frame without a board.
     """
