@@ -393,7 +393,7 @@ REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
 #: a corner farther than this from the local homography of its neighbours (in pixels, or this
 #: fraction of its local square size, whichever is larger) disagrees with the grid
 GRID_TOLERANCE_PX = 0.75
-GRID_TOLERANCE_FRACTION = 0.06
+GRID_TOLERANCE_FRACTION = 0.1
 REASON_INCONSISTENT = "inconsistent_grid"
 
 
