@@ -24,7 +24,7 @@ Part 5 (real photographs, skipped with ``--quick``): OpenCV's sample photographs
 ``data/real`` calibrated (``cv2.calibrateCamera``, k3 fixed) from the kit's corners and from
 OpenCV's sample pipeline (``cornerSubPix`` 11x11) and ``findChessboardCornersSB``.
 ``--figure PNG`` draws, for one real photograph and one stress frame, the kit's corners (green)
-and the ROS / sample-pipeline corners (red) on 4x crops of the outer column.
+and the ROS / sample-pipeline corners (red) on 3x crops of the outer column.
 
 Run::
 
@@ -352,7 +352,7 @@ def print_real(real: dict) -> None:
 
 
 def draw_figure(path: Path) -> None:
-    """4x crops of the outer column: kit corners green, ROS / sample-pipeline corners red."""
+    """3x crops of the outer column: kit corners green, ROS / sample-pipeline corners red."""
     import cv2
 
     from dtscal_lib import synth
@@ -360,28 +360,31 @@ def draw_figure(path: Path) -> None:
     from dtscal_lib.detect import detect_board_still
 
     tiles = []
-    g = cv2.imread(str(REAL / "right" / "right04.jpg"), cv2.IMREAD_GRAYSCALE)
+    g = cv2.imread(str(REAL / "left" / "left02.jpg"), cv2.IMREAD_GRAYSCALE)
     board = parse_board("9x6", 0.03)
-    kit, other = detect_board_still(g, board).corners, _opencv_sample_corners(g)
-    tiles.append(_crop(g, kit, other, board, "real photo right04: kit (green) vs OpenCV sample 11x11 (red)"))
+    kit, other = detect_board_still(g, board).corners, order_corners(_opencv_sample_corners(g), board)
+    tiles.append(_crop(g, kit, other, board, "real left02: kit (green), OpenCV 11x11 (red)"))
     case = synth.render_stress_case("narrow_outer", 0)
     gs = cv2.cvtColor(case.image, cv2.COLOR_BGR2GRAY)
     kit, ros = detect_board_still(gs, case.board).corners, detect_board_ros(gs, case.board).corners
-    tiles.append(_crop(gs, kit, ros, case.board, "stress narrow_outer: kit (green) vs ROS window (red)"))
+    tiles.append(_crop(gs, kit, ros, case.board, "stress narrow_outer: kit (green), ROS (red)"))
     w = max(t.shape[1] for t in tiles)
     tiles = [cv2.copyMakeBorder(t, 0, 8, 0, w - t.shape[1], cv2.BORDER_CONSTANT, value=(255, 255, 255)) for t in tiles]
     path.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(path), np.vstack(tiles))
 
 
-def _crop(gray, kit, other, board, title: str, scale: int = 4):
+def _crop(gray, kit, other, board, title: str, scale: int = 3):
     import cv2
 
     grid = kit.reshape(board.rows, board.cols, 2)
-    col = grid[:, 0] if grid[:, 0, 0].mean() < grid[:, -1, 0].mean() else grid[:, -1]
-    x0, y0 = np.floor(col.min(axis=0) - 25).astype(int)
-    x1, y1 = np.ceil(col.max(axis=0) + 25).astype(int)
+    # the outer column where the other corners are farthest from the kit's
+    gap = np.linalg.norm(grid - np.asarray(other).reshape(grid.shape), axis=2) if other is not None else None
+    col = grid[:, 0] if gap is None or gap[:, 0].max() >= gap[:, -1].max() else grid[:, -1]
+    x0, y0 = np.floor(col.min(axis=0) - 50).astype(int)
+    x1, y1 = np.ceil(col.max(axis=0) + 50).astype(int)
     x0, y0 = max(x0, 0), max(y0, 0)
+    x1, y1 = min(x1, gray.shape[1]), min(y1, gray.shape[0])
     crop = cv2.resize(gray[y0:y1, x0:x1], None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     img = cv2.cvtColor(crop, cv2.COLOR_GRAY2BGR)
     for pts, colour in ((other, (0, 0, 255)), (kit, (0, 200, 0))):
