@@ -385,6 +385,9 @@ OUTER_SQUARE_FRACTION = 0.35
 INNER_REACH = 0.7
 #: and stays this many pixels short of any far edge (edge blur, start error of the detector)
 WINDOW_MARGIN_PX = 1.5
+#: an outer corner whose small window sees less isotropic gradients than this (corner_isotropy) is
+#: refined with a window as big as an inner corner's (motion blur)
+MIN_ISOTROPY = 0.4
 #: smallest window half-size, pixels (smaller windows cannot pull in a start a pixel or two off on blurred
 #: small boards)
 MIN_WINDOW = 4
@@ -412,7 +415,8 @@ def _neighbour_vectors(corners: np.ndarray, board: Board):
     return right, left, down, up
 
 
-def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
+def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
+                   outer_fraction: float = OUTER_SQUARE_FRACTION) -> np.ndarray:
     """Per-corner ``cornerSubPix`` window half-size that stays inside the corner's own four squares.
 
     ``cornerSubPix`` treats every intensity edge in its (square, axis-aligned) window as an
@@ -429,6 +433,7 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.n
     Parameters
     ----------
     corners : (N, 2) pixels, board row-major order
+    outer_fraction : assumed width of the outward squares of the outer ring, in squares
 
     Returns
     -------
@@ -461,7 +466,7 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.n
         dist = np.abs((step * normal).sum(axis=-1))
         outer = np.isnan(dist)
         dist_opp = np.abs((opposite * normal).sum(axis=-1))
-        reach = np.where(outer, OUTER_SQUARE_FRACTION * dist_opp, INNER_REACH * dist)
+        reach = np.where(outer, outer_fraction * dist_opp, INNER_REACH * dist)
         room = np.minimum(room, (reach - WINDOW_MARGIN_PX) / support)
     return np.maximum(MIN_WINDOW, np.floor(room)).astype(int).ravel()
 
@@ -559,9 +564,11 @@ def _local_square(corners: np.ndarray, board: Board) -> np.ndarray:
 def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIETOWN_BOARD):
     """The kit's sub-pixel refinement: own-squares windows, then three checks.
 
-    1. Every corner is refined with its :func:`corner_windows` half-size; a corner that moved
-       farther than half its local square (or its window) left its own squares and goes back
-       to the detector's position.
+    1. Every corner is refined with its :func:`corner_windows` half-size (an outer corner whose
+       small window sees gradients in about one direction only, :func:`corner_isotropy` below
+       :data:`MIN_ISOTROPY`, as under motion blur, with a window as big as an inner corner's);
+       a corner that moved farther than half its local square (or its window) left its own
+       squares and goes back to the detector's position.
     2. Each inner corner is compared with its 8 neighbours' local homography
        (:func:`grid_disagreement`); one that disagrees by more than :data:`GRID_TOLERANCE_PX`
        (or :data:`GRID_TOLERANCE_FRACTION` of its local square) is refined again, from the
@@ -597,6 +604,18 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
             c[idx] = alt[better]
             raw = raw.copy()
             raw[idx] = pred[idx]  # the start that was used
+    # a small outer window on a motion-blurred corner sees edges in one direction only and cannot
+    # locate it: there the window as big as an inner corner's is used (where it is bigger)
+    if outer.any():
+        sel = np.flatnonzero(outer & (corner_isotropy(gray, c, radius) < MIN_ISOTROPY))
+        if len(sel):
+            big_r = corner_windows(raw, board, outer_fraction=INNER_REACH)[sel]
+            grow = big_r > radius[sel]
+            sel, big_r = sel[grow], big_r[grow]
+            if len(sel):
+                c[sel] = _subpix(gray, raw[sel], big_r)
+                radius = radius.copy()
+                radius[sel] = big_r
     wandered = np.linalg.norm(c - raw, axis=1) > np.maximum(radius, 0.5 * square)
     c[wandered] = raw[wandered]
     tol = np.maximum(GRID_TOLERANCE_PX, GRID_TOLERANCE_FRACTION * square)
@@ -647,6 +666,39 @@ def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
         num = np.sum((gx * px + gy * py) ** 2, axis=1)
         den = np.sum((gx * gx + gy * gy) * (px * px + py * py), axis=1)
         out[sel] = np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
+    return out
+
+
+def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Smaller over larger eigenvalue of the gradient structure tensor in each window (0..1).
+
+    A corner has strong gradients in two directions (about 0.3-1); an edge, or a corner smeared
+    by motion blur, in one direction only (near 0), where ``cornerSubPix`` is ill-conditioned.
+
+    Parameters
+    ----------
+    gray : (h, w) uint8
+    points : (M, 2) pixels
+    radius : (M,) int window half-sizes
+
+    Returns
+    -------
+    (M,) float64
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    radius = np.asarray(radius, dtype=int).reshape(-1)
+    out = np.zeros(len(pts))
+    img = gray.astype(np.float32)
+    for r in np.unique(radius):
+        sel = np.flatnonzero(radius == r)
+        n = 2 * int(r) + 3
+        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
+        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
+        gx, gy = gx[:, 1:-1, 1:-1], gy[:, 1:-1, 1:-1]
+        a, b, d = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
+        half_tr, det = 0.5 * (a + d), a * d - b * b
+        root = np.sqrt(np.maximum(half_tr ** 2 - det, 0.0))
+        out[sel] = np.where(half_tr > 0, (half_tr - root) / np.maximum(half_tr + root, 1e-300), 0.0)
     return out
 
 
