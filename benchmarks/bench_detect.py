@@ -24,7 +24,7 @@ Part 5 (real photographs, skipped with ``--quick``): OpenCV's sample photographs
 ``data/real`` calibrated (``cv2.calibrateCamera``, k3 fixed) from the kit's corners and from
 OpenCV's sample pipeline (``cornerSubPix`` 11x11) and ``findChessboardCornersSB``.
 ``--figure PNG`` draws, for one real photograph and one stress frame, the kit's corners (green)
-and the ROS / sample-pipeline corners (red) on 3x crops of the outer column.
+and the ROS / sample-pipeline corners (red) on 2x crops of the outer column.
 
 Run::
 
@@ -352,7 +352,7 @@ def print_real(real: dict) -> None:
 
 
 def draw_figure(path: Path) -> None:
-    """3x crops of the outer column: kit corners green, ROS / sample-pipeline corners red."""
+    """2x crops of the outer column: kit corners green, ROS / sample-pipeline corners red."""
     import cv2
 
     from dtscal_lib import synth
@@ -371,10 +371,10 @@ def draw_figure(path: Path) -> None:
     w = max(t.shape[1] for t in tiles)
     tiles = [cv2.copyMakeBorder(t, 0, 8, 0, w - t.shape[1], cv2.BORDER_CONSTANT, value=(255, 255, 255)) for t in tiles]
     path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), np.vstack(tiles))
+    cv2.imwrite(str(path), np.vstack(tiles), [cv2.IMWRITE_PNG_COMPRESSION, 9])
 
 
-def _crop(gray, kit, other, board, title: str, scale: int = 3):
+def _crop(gray, kit, other, board, title: str, scale: int = 2):
     import cv2
 
     grid = kit.reshape(board.rows, board.cols, 2)

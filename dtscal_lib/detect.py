@@ -818,6 +818,9 @@ def _finish(gray: np.ndarray, raw: np.ndarray, board: Board, border_margin: floa
     else:
         corners, ok = refine_corners_checked(gray, raw, board)
         if not ok:
+            # a board running off the image is reported as such (ROS's rule), not as inconsistent
+            if _near_border(raw, (w, h), border_margin) or _near_border(corners, (w, h), border_margin):
+                return Detection(False, raw, REASON_AT_BORDER, board, (w, h))
             return Detection(False, None, REASON_INCONSISTENT, board, (w, h))
     if _near_border(corners, (w, h), border_margin):
         return Detection(False, corners, REASON_AT_BORDER, board, (w, h))
