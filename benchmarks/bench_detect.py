@@ -367,7 +367,7 @@ def draw_figure(path: Path) -> None:
     case = synth.render_stress_case("narrow_outer", 0)
     gs = cv2.cvtColor(case.image, cv2.COLOR_BGR2GRAY)
     kit, ros = detect_board_still(gs, case.board).corners, detect_board_ros(gs, case.board).corners
-    tiles.append(_crop(gs, kit, ros, case.board, "stress narrow_outer: kit (green), ROS (red)"))
+    tiles.append(_crop(gs, kit, ros, case.board, "stress: kit (green), ROS (red)"))
     w = max(t.shape[1] for t in tiles)
     tiles = [cv2.copyMakeBorder(t, 0, 8, 0, w - t.shape[1], cv2.BORDER_CONSTANT, value=(255, 255, 255)) for t in tiles]
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -394,7 +394,7 @@ def _crop(gray, kit, other, board, title: str, scale: int = 2):
             c = (round((x - x0 + 0.5) * scale - 0.5), round((y - y0 + 0.5) * scale - 0.5))
             cv2.drawMarker(img, c, colour, cv2.MARKER_CROSS, 14, 2)
     bar = np.full((28, img.shape[1], 3), 255, np.uint8)
-    cv2.putText(bar, title, (4, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(bar, title, (4, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
     return np.vstack([bar, img])
 
 
