@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import importlib.util
-import os
 import math
+import os
 from pathlib import Path
 
 import cv2
