@@ -16,11 +16,22 @@ false detections, corner error, time distribution.
 Part 3 (if ``data/session`` holds the synthetic recording, skipped with ``--quick``): both
 detectors on every frame of ``intrinsics.bag`` against the corners in ``truth.yaml``.
 
+Part 4 (stress set, skipped with ``--quick``): ``synth.render_stress_case`` for every kind and
+``--stress-seeds`` seeds: corner error of the kit's refinement (``detect_board_still``) and of
+ROS's (``detect_board_ros``: one window of half the smallest spacing) against exact truth.
+
+Part 5 (real photographs, skipped with ``--quick``): OpenCV's sample photographs in
+``data/real`` calibrated (``cv2.calibrateCamera``, k3 fixed) from the kit's corners and from
+OpenCV's sample pipeline (``cornerSubPix`` 11x11) and ``findChessboardCornersSB``.
+``--figure PNG`` draws, for one real photograph and one stress frame, the kit's corners (green)
+and the ROS / sample-pipeline corners (red) on 2x crops of the outer column.
+
 Run::
 
     .venv/bin/python benchmarks/bench_detect.py            # tables
     .venv/bin/python benchmarks/bench_detect.py --json     # numbers as JSON
     .venv/bin/python benchmarks/bench_detect.py --check    # exit 1 if the target is missed
+    .venv/bin/python benchmarks/bench_detect.py --figure benchmarks/detect_real_boards.png
 """
 
 from __future__ import annotations
@@ -230,6 +241,163 @@ def print_report(timing: dict, quality: dict | None) -> None:
           f"{quality['found_by_ours_only']}")
 
 
+REAL = Path(__file__).resolve().parents[1] / "data" / "real" / "opencv-samples"
+
+
+def part_stress(seeds: int) -> dict:
+    """Kit and ROS refinement on every stress kind (median and worst corner error, px)."""
+    from dtscal_lib import synth
+    from dtscal_lib.detect import detect_board_still
+
+    renderers, out = {}, {}
+    for kind in synth.STRESS_KINDS:
+        cam = synth.stress_camera(kind)
+        key = tuple(cam.dist.ravel())
+        renderers.setdefault(key, synth.make_renderer(cam))
+        row = {"kit": [], "ros": []}
+        for seed in range(seeds):
+            case = synth.render_stress_case(kind, seed, renderer=renderers[key])
+            truth = _canonical(case)
+            for name, fn in (("kit", detect_board_still), ("ros", detect_board_ros)):
+                d = fn(case.image, case.board)
+                e = np.linalg.norm(d.corners - truth, axis=1) if d.found else None
+                row[name].append(None if e is None else (float(np.median(e)), float(e.max())))
+        out[kind] = {name: {"found": sum(r is not None for r in rows), "cases": len(rows),
+                            "median_px_worst_case": max((r[0] for r in rows if r), default=None),
+                            "max_px": max((r[1] for r in rows if r), default=None)}
+                     for name, rows in row.items()}
+    return out
+
+
+def _canonical(case) -> np.ndarray:
+    """Truth in the detector's order, from the pose (the rule of tests/detect_truth.py)."""
+    import cv2
+
+    b = case.board
+    c = case.corners.reshape(b.rows, b.cols, 2)
+    R = cv2.Rodrigues(np.asarray(case.rvec, dtype=np.float64))[0]
+    centre = R @ np.array([(b.cols - 1) * b.square / 2, (b.rows - 1) * b.square / 2, 0.0]) + case.tvec
+    if float(R[:, 2] @ centre) < 0:
+        c = c[:, ::-1]
+    if c[0, 0, 1] > c[-1, -1, 1]:
+        c = c[::-1, ::-1]
+    return c.reshape(-1, 2)
+
+
+def _opencv_sample_corners(g, window: int = 11):
+    import cv2
+
+    ok, c = cv2.findChessboardCorners(g, (9, 6), None)
+    if not ok:
+        return None
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001)
+    return cv2.cornerSubPix(g, c, (window, window), (-1, -1), crit).reshape(-1, 2)
+
+
+def part_real() -> dict | None:
+    """Calibrations of the real photographs from three corner sources (fx, cx, cy, rms, views)."""
+    import cv2
+
+    from dtscal_lib.boards import parse_board
+    from dtscal_lib.detect import detect_board_still
+
+    if not REAL.is_dir():
+        return None
+    board = parse_board("9x6", 0.03)
+    obj = board.object_points().astype(np.float32)
+    out = {}
+    for side in ("left", "right"):
+        imgs = [cv2.imread(str(f), cv2.IMREAD_GRAYSCALE) for f in sorted((REAL / side).glob("*.jpg"))]
+        sources = {"kit": [], "opencv sample 11x11": [], "findChessboardCornersSB": []}
+        for g in imgs:
+            d = detect_board_still(g, board)
+            if d.found:
+                sources["kit"].append(d.corners)
+            c = _opencv_sample_corners(g)
+            if c is not None:
+                sources["opencv sample 11x11"].append(c)
+            ok, c = cv2.findChessboardCornersSB(g, (9, 6), flags=cv2.CALIB_CB_ACCURACY)
+            if ok:
+                sources["findChessboardCornersSB"].append(c.reshape(-1, 2))
+        out[side] = {}
+        for name, corners in sources.items():
+            rms, K, *_ = cv2.calibrateCamera([obj] * len(corners), [c.astype(np.float32) for c in corners],
+                                             (640, 480), None, None, flags=cv2.CALIB_FIX_K3)
+            out[side][name] = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2], "rms": rms,
+                               "views": len(corners)}
+    return out
+
+
+def print_stress(st: dict) -> None:
+    print()
+    print("Stress set (synth.render_stress_case), corner error against exact truth, px: "
+          "worst per-case median / worst corner")
+    print(f"{'kind':14s} {'kit (detect_board_still)':>26s} {'ROS refinement':>22s}")
+    for kind, r in st.items():
+        cells = []
+        for name in ("kit", "ros"):
+            x = r[name]
+            cells.append(f"{x['found']}/{x['cases']} found" if x["max_px"] is None else
+                         f"{x['median_px_worst_case']:.3f} / {x['max_px']:.2f} ({x['found']}/{x['cases']})")
+        print(f"{kind:14s} {cells[0]:>26s} {cells[1]:>22s}")
+
+
+def print_real(real: dict) -> None:
+    print()
+    print("Real photographs (data/real, OpenCV samples, 9x6): calibrateCamera (k3 fixed) from each corner source")
+    for side, rows in real.items():
+        for name, r in rows.items():
+            print(f"{side:6s} {name:26s} fx {r['fx']:7.1f} fy {r['fy']:7.1f} cx {r['cx']:6.1f} cy {r['cy']:6.1f} "
+                  f"rms {r['rms']:.3f} px ({r['views']} views)")
+
+
+def draw_figure(path: Path) -> None:
+    """2x crops of the outer column: kit corners green, ROS / sample-pipeline corners red."""
+    import cv2
+
+    from dtscal_lib import synth
+    from dtscal_lib.boards import parse_board
+    from dtscal_lib.detect import detect_board_still
+
+    tiles = []
+    g = cv2.imread(str(REAL / "left" / "left02.jpg"), cv2.IMREAD_GRAYSCALE)
+    board = parse_board("9x6", 0.03)
+    kit, other = detect_board_still(g, board).corners, order_corners(_opencv_sample_corners(g), board)
+    tiles.append(_crop(g, kit, other, board, "real left02: kit (green), OpenCV 11x11 (red)"))
+    case = synth.render_stress_case("narrow_outer", 0)
+    gs = cv2.cvtColor(case.image, cv2.COLOR_BGR2GRAY)
+    kit, ros = detect_board_still(gs, case.board).corners, detect_board_ros(gs, case.board).corners
+    tiles.append(_crop(gs, kit, ros, case.board, "stress: kit (green), ROS (red)"))
+    w = max(t.shape[1] for t in tiles)
+    tiles = [cv2.copyMakeBorder(t, 0, 8, 0, w - t.shape[1], cv2.BORDER_CONSTANT, value=(255, 255, 255)) for t in tiles]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), np.vstack(tiles), [cv2.IMWRITE_PNG_COMPRESSION, 9])
+
+
+def _crop(gray, kit, other, board, title: str, scale: int = 2):
+    import cv2
+
+    grid = kit.reshape(board.rows, board.cols, 2)
+    # the outer column where the other corners are farthest from the kit's
+    gap = np.linalg.norm(grid - np.asarray(other).reshape(grid.shape), axis=2) if other is not None else None
+    col = grid[:, 0] if gap is None or gap[:, 0].max() >= gap[:, -1].max() else grid[:, -1]
+    x0, y0 = np.floor(col.min(axis=0) - 50).astype(int)
+    x1, y1 = np.ceil(col.max(axis=0) + 50).astype(int)
+    x0, y0 = max(x0, 0), max(y0, 0)
+    x1, y1 = min(x1, gray.shape[1]), min(y1, gray.shape[0])
+    crop = cv2.resize(gray[y0:y1, x0:x1], None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
+    img = cv2.cvtColor(crop, cv2.COLOR_GRAY2BGR)
+    for pts, colour in ((other, (0, 0, 255)), (kit, (0, 200, 0))):
+        if pts is None:
+            continue
+        for x, y in np.asarray(pts).reshape(-1, 2):
+            c = (round((x - x0 + 0.5) * scale - 0.5), round((y - y0 + 0.5) * scale - 0.5))
+            cv2.drawMarker(img, c, colour, cv2.MARKER_CROSS, 14, 2)
+    bar = np.full((28, img.shape[1], 3), 255, np.uint8)
+    cv2.putText(bar, title, (4, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.vstack([bar, img])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", action="store_true", help="print the numbers as JSON")
@@ -238,19 +406,29 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=21, help="runs per timing (median)")
     ap.add_argument("--boards", type=int, default=60, help="board frames in the quality set")
     ap.add_argument("--empty", type=int, default=20, help="board-free frames in the quality set")
+    ap.add_argument("--stress-seeds", type=int, default=3, help="seeds per stress kind")
+    ap.add_argument("--figure", type=Path, help="write the real/stress corner figure to this PNG")
     args = ap.parse_args(argv)
+    if args.figure is not None:
+        draw_figure(args.figure)
 
     renderer = FrameRenderer()
     timing = part_timing(renderer, args.repeats)
     quality = None if args.quick else part_quality(renderer, args.boards, args.empty)
     session = None if args.quick else part_session()
+    stress = None if args.quick else part_stress(args.stress_seeds)
+    real = None if args.quick else part_real()
     if args.json:
-        print(json.dumps({"target_ms": TARGET_MS, "timing": timing, "quality": quality, "session": session},
-                         indent=2))
+        print(json.dumps({"target_ms": TARGET_MS, "timing": timing, "quality": quality, "session": session,
+                          "stress": stress, "real": real}, indent=2, default=float))
     else:
         print_report(timing, quality)
         if session is not None:
             print_session(session)
+        if stress is not None:
+            print_stress(stress)
+        if real is not None:
+            print_real(real)
     missed = [k for k, v in timing.items() if not v["meets_target"]]
     if args.check and missed:
         print(f"target missed for: {', '.join(missed)}", file=sys.stderr)

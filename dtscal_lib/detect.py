@@ -24,12 +24,17 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
 3. **Classic detection on the candidate region only**: ``findChessboardCorners`` on the
    cluster's bounding box plus a margin (ROS's flags without ``FAST_CHECK``, whose quick
    test rejects many tightly cropped boards; small regions are tried again at twice the
-   size), then ``cornerSubPix`` on the full image with ROS's window rule (half the
-   smallest corner spacing, at least 2 px).
-4. **A guard on the refinement**: on tiny or strongly foreshortened boards ``cornerSubPix``
-   can wander several pixels off. A corner that left its search window, or that lies
-   off a smooth (cubic) grid through the other corners, goes back to the detector's
-   position; if the grid still is not smooth the detection is dropped.
+   size).
+4. **Sub-pixel refinement that stays inside each corner's own squares**
+   (:func:`refine_corners_checked`). ROS refines every corner with one ``cornerSubPix``
+   window of half the smallest corner spacing; on real boards (outer squares cut narrow,
+   a printed outline, the board's edge or clutter close by) that window reaches past the
+   corner's four squares and the outer corners converge on the edge, pixels away. Here each
+   corner gets its own window (:func:`corner_windows`), the outer ring is restarted from the
+   inner corners' local homography where it disagrees, each inner corner is checked against
+   its 8 neighbours' homography (:func:`grid_disagreement`; re-refined with half the window,
+   or the view is rejected as ``"inconsistent_grid"``), and a corner off a smooth (cubic)
+   grid through the others goes back to the detector's position or is dropped with the view.
 
 A frame without any candidate costs only steps 1-2 (about 1.5-3 ms at 640x480); see
 ``benchmarks/bench_detect.py`` for the measured figures and ratios against the ROS call,
@@ -77,6 +82,9 @@ MERGE_REACH = 3.0
 
 REASON_NO_BOARD = Reason.NO_BOARD
 REASON_AT_BORDER = Reason.AT_BORDER
+#: a detection whose corners do not all lie on a smooth grid (cubic in the corner indices) is
+#: dropped when a corner is off by more than this fraction of the smallest corner spacing
+SMOOTH_GRID_TOLERANCE = 0.2
 
 
 @dataclass(frozen=True)
@@ -92,8 +100,9 @@ class Detection:
         running top to bottom. Also set when ``reason == "at_border"`` (so a UI can
         show the rejected board); ``None`` when no board was found.
     reason : str or None
-        ``None`` when found, else ``"no_board"`` (no board, or a detection whose corners do
-        not form a smooth grid and was dropped as unreliable) or ``"at_border"``.
+        ``None`` when found, else ``"no_board"``, ``"at_border"`` or ``"inconsistent_grid"``
+        (a board was seen but some corner disagrees with its neighbours' grid even after
+        re-refinement: dropped as unreliable rather than fed to a calibration).
     board : Board
     image_size : (w, h)
     """
@@ -368,6 +377,343 @@ def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIET
     return pts.reshape(-1, 2).astype(np.float64)
 
 
+#: the outermost squares of a real board may be cut narrow, carry a printed outline or end at the
+#: board's edge: a corner on the outer ring of the grid assumes its outward squares are at least
+#: this fraction of a full square wide
+OUTER_SQUARE_FRACTION = 0.35
+#: an inner corner's window reaches at most this fraction of the way to its squares' far edges
+INNER_REACH = 0.7
+#: and stays this many pixels short of any far edge (edge blur, start error of the detector)
+WINDOW_MARGIN_PX = 1.5
+#: an outer corner whose small window sees less isotropic gradients than this (corner_isotropy) is
+#: refined with a window as big as an inner corner's (motion blur)
+MIN_ISOTROPY = 0.4
+#: smallest window half-size, pixels (smaller windows cannot pull in a start a pixel or two off on blurred
+#: small boards)
+MIN_WINDOW = 4
+#: stopping rule of the kit's refinement: 30 iterations or a step below 0.01 px (ROS: 30, 0.1 px)
+REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
+#: a corner farther than this from the local homography of its neighbours (in pixels, or this
+#: fraction of its local square size, whichever is larger) disagrees with the grid
+GRID_TOLERANCE_PX = 0.75
+GRID_TOLERANCE_FRACTION = 0.1
+REASON_INCONSISTENT = Reason.INCONSISTENT_GRID
+
+
+def _neighbour_vectors(corners: np.ndarray, board: Board):
+    """Vectors from each corner to its four grid neighbours, NaN where there is none.
+
+    Returns ``(right, left, down, up)``, each ``(rows, cols, 2)``: right = to corner (j, i+1),
+    left = to (j, i-1), down = to (j+1, i), up = to (j-1, i).
+    """
+    g = np.asarray(corners, dtype=np.float64).reshape(board.rows, board.cols, 2)
+    nan = np.full_like(g, np.nan)
+    right, left, down, up = nan.copy(), nan.copy(), nan.copy(), nan.copy()
+    dx, dy = np.diff(g, axis=1), np.diff(g, axis=0)
+    right[:, :-1], left[:, 1:] = dx, -dx
+    down[:-1], up[1:] = dy, -dy
+    return right, left, down, up
+
+
+def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
+                   outer_fraction: float = OUTER_SQUARE_FRACTION) -> np.ndarray:
+    """Per-corner ``cornerSubPix`` window half-size that stays inside the corner's own four squares.
+
+    ``cornerSubPix`` treats every intensity edge in its (square, axis-aligned) window as an
+    edge through the corner. The far edges of the corner's four squares, and anything beyond
+    them (the board's physical edge, a printed outline, clutter), pull the estimate. The
+    window half-size ``r`` is therefore limited, for each of the four sides, so that the
+    window's reach toward that side's far edge, ``r (|n_x| + |n_y|)`` for the edge's unit
+    normal ``n``, stays below the edge's distance times :data:`INNER_REACH`, minus
+    :data:`WINDOW_MARGIN_PX`. On the outer ring of the grid the outward squares may be
+    cut narrow: their far edge is assumed at :data:`OUTER_SQUARE_FRACTION` of the opposite
+    square's width. The local geometry comes from the corner's neighbours, so perspective
+    (near squares big, far squares small) gives each corner its own window.
+
+    Parameters
+    ----------
+    corners : (N, 2) pixels, board row-major order
+    outer_fraction : assumed width of the outward squares of the outer ring, in squares
+
+    Returns
+    -------
+    (N,) int window half-sizes, at least :data:`MIN_WINDOW`
+
+    Examples
+    --------
+    >>> from dtscal_lib.boards import parse_board
+    >>> b = parse_board("4x3")
+    >>> grid = np.mgrid[0:3, 0:4][::-1].transpose(1, 2, 0).reshape(-1, 2) * 30.0 + 100
+    >>> corner_windows(grid, b).reshape(3, 4)
+    array([[ 9,  9,  9,  9],
+           [ 9, 19, 19,  9],
+           [ 9,  9,  9,  9]])
+    """
+    right, left, down, up = _neighbour_vectors(corners, board)
+
+    def unit(a, b):
+        v = np.where(np.isnan(a), b, a) + np.where(np.isnan(b), a, b)  # a, b point the same way
+        return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+
+    along = unit(right, -left)   # direction of the rows at each corner
+    across = unit(down, -up)     # direction of the columns
+    room = np.full(right.shape[:2], np.inf)
+    # a side reached by stepping along `step` has its far edge parallel to `edge_dir`
+    for step, opposite, edge_dir in ((right, left, across), (left, right, across),
+                                     (down, up, along), (up, down, along)):
+        normal = np.stack([-edge_dir[..., 1], edge_dir[..., 0]], axis=-1)
+        support = np.abs(normal).sum(axis=-1)
+        dist = np.abs((step * normal).sum(axis=-1))
+        outer = np.isnan(dist)
+        dist_opp = np.abs((opposite * normal).sum(axis=-1))
+        reach = np.where(outer, outer_fraction * dist_opp, INNER_REACH * dist)
+        room = np.minimum(room, (reach - WINDOW_MARGIN_PX) / support)
+    return np.maximum(MIN_WINDOW, np.floor(room)).astype(int).ravel()
+
+
+def _subpix(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """``cornerSubPix`` of each point with its own window half-size (grouped by size)."""
+    out = np.asarray(pts, dtype=np.float64).reshape(-1, 2).copy()
+    h, w = gray.shape[:2]
+    out = np.clip(out, 0.0, [w - 1.0, h - 1.0])  # cornerSubPix needs its start inside the image
+    for r in np.unique(radius):
+        sel = radius == r
+        p = out[sel].astype(np.float32).reshape(-1, 1, 2).copy()
+        cv2.cornerSubPix(gray, p, (int(r), int(r)), (-1, -1), REFINE_CRITERIA)
+        out[sel] = p.reshape(-1, 2)
+    return out
+
+
+def grid_disagreement(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
+    """Distance of each corner from where its neighbours' local homography puts it.
+
+    For each corner, a homography from board indices to pixels is fitted (DLT) to the
+    corners within two rows and columns of it, itself left out, and evaluated at the
+    corner's own index. A flat board seen through a smooth lens is locally a homography,
+    so a true corner agrees to a small fraction of a pixel; a corner pulled by an edge or
+    clutter does not.
+
+    Parameters
+    ----------
+    corners : (N, 2) pixels, board row-major order
+
+    Returns
+    -------
+    (N,) float64 pixels (NaN for a corner with fewer than 5 neighbours)
+    """
+    return _grid_prediction(corners, board)[1]
+
+
+def _grid_prediction(corners: np.ndarray, board: Board, exclude: np.ndarray | None = None):
+    """(predicted (N, 2) pixels, distance (N,)) from the local homographies.
+
+    Inner corners are predicted from their 8 neighbours (the 3x3 block around them), corners on
+    the outer ring of the grid from the 5x5 block (8 or 14 neighbours). ``exclude``d corners are
+    not used as neighbours.
+    """
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    pred, err = np.full_like(c, np.nan), np.full(len(c), np.nan)
+    for reach in (1, 2):
+        p, e, n = _local_homography(c, board, reach, exclude)
+        use = np.isnan(err) & (n >= (8 if reach == 1 else 6))
+        pred[use], err[use] = p[use], e[use]
+    return pred, err
+
+
+def _local_homography(c: np.ndarray, board: Board, reach: int, exclude: np.ndarray | None):
+    """Per-corner DLT from index offsets within ``reach`` to pixels; (pred, err, n_neighbours)."""
+    R, C = board.rows, board.cols
+    j, i = np.divmod(np.arange(R * C), C)
+    offs = np.array([(dj, di) for dj in range(-reach, reach + 1) for di in range(-reach, reach + 1)
+                     if (dj, di) != (0, 0)])
+    nj, ni = j[:, None] + offs[:, 0], i[:, None] + offs[:, 1]
+    valid = (nj >= 0) & (nj < R) & (ni >= 0) & (ni < C)
+    nb = np.where(valid, nj * C + ni, 0)
+    if exclude is not None:
+        valid &= ~np.asarray(exclude, dtype=bool)[nb]
+    n = valid.sum(1)
+    # pixel coordinates relative to the neighbours' mean, scaled to about 1 (conditioning)
+    p = c[nb]
+    m = valid[..., None].astype(np.float64)
+    centre = (p * m).sum(1) / np.maximum(n, 1)[:, None]
+    scale = np.sqrt((((p - centre[:, None]) ** 2).sum(-1) * valid).sum(1) / np.maximum(n, 1))
+    scale = np.maximum(scale, 1e-9)
+    q = (p - centre[:, None]) / scale[:, None, None]
+    x = np.broadcast_to(offs[None, :, 1].astype(np.float64), q.shape[:2])
+    y = np.broadcast_to(offs[None, :, 0].astype(np.float64), q.shape[:2])
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    u, v = q[..., 0], q[..., 1]
+    r1 = np.stack([x, y, one, zero, zero, zero, -u * x, -u * y, -u], axis=-1)
+    r2 = np.stack([zero, zero, zero, x, y, one, -v * x, -v * y, -v], axis=-1)
+    A = np.concatenate([r1, r2], axis=1) * np.concatenate([valid, valid], axis=1)[..., None]
+    h = np.linalg.eigh(np.einsum("nki,nkj->nij", A, A))[1][:, :, 0]  # least-squares null vector
+    # evaluate at the corner's own index, offset (0, 0)
+    w = h[:, 8:9]
+    ok = np.abs(w[:, 0]) > 1e-12
+    pred = np.full_like(c, np.nan)
+    pred[ok] = (h[ok][:, [2, 5]] / w[ok]) * scale[ok, None] + centre[ok]
+    return pred, np.linalg.norm(pred - c, axis=1), n
+
+
+def _local_square(corners: np.ndarray, board: Board) -> np.ndarray:
+    right, left, down, up = _neighbour_vectors(corners, board)
+    lens = np.stack([np.linalg.norm(v, axis=-1) for v in (right, left, down, up)], axis=-1)
+    return np.nanmin(lens, axis=-1).ravel()
+
+
+def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIETOWN_BOARD):
+    """The kit's sub-pixel refinement: own-squares windows, then three checks.
+
+    1. Every corner is refined with its :func:`corner_windows` half-size (an outer corner whose
+       small window sees gradients in about one direction only, :func:`corner_isotropy` below
+       :data:`MIN_ISOTROPY`, as under motion blur, with a window as big as an inner corner's);
+       a corner that moved farther than half its local square (or its window) left its own
+       squares and goes back to the detector's position.
+    2. Each inner corner is compared with its 8 neighbours' local homography
+       (:func:`grid_disagreement`); one that disagrees by more than :data:`GRID_TOLERANCE_PX`
+       (or :data:`GRID_TOLERANCE_FRACTION` of its local square) is refined again, from the
+       neighbours' prediction, with half the window. If it still disagrees the detection is
+       unreliable (``ok`` False).
+    3. The smooth-grid guard: a corner off the cubic grid through the others
+       (:func:`grid_residuals` above :data:`SMOOTH_GRID_TOLERANCE`) goes back to the
+       detector's position or the grid's refined prediction, whichever lies on the grid;
+       otherwise ``ok`` is False.
+
+    Returns
+    -------
+    (corners (N, 2) float64, ok: bool)
+    """
+    raw = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    radius = corner_windows(raw, board)
+    half = np.maximum(MIN_WINDOW, radius // 2)
+    square = _local_square(raw, board)
+    c = _subpix(gray, raw, radius)
+    # the outer ring's windows are small and cannot pull in a start a few pixels off: where one
+    # ended far from where the refined inner corners put it, start it again from there and keep
+    # the answer that fits a corner better (corner_misfit)
+    outer = _outer_ring(board)
+    if outer.any() and (~outer).sum() >= 4:
+        pred, _, n = _local_homography(c, board, 2, outer)
+        use = outer & (n >= 4) & np.all(np.isfinite(pred), axis=1)
+        use[use] = np.linalg.norm(c[use] - pred[use], axis=1) > np.maximum(1.0, 0.25 * radius[use])
+        if use.any():
+            alt = _subpix(gray, pred[use], radius[use])
+            idx = np.flatnonzero(use)
+            better = corner_misfit(gray, alt, radius[idx]) < corner_misfit(gray, c[idx], radius[idx])
+            idx = idx[better]
+            c[idx] = alt[better]
+            raw = raw.copy()
+            raw[idx] = pred[idx]  # the start that was used
+    # a small outer window on a motion-blurred corner sees edges in one direction only and cannot
+    # locate it: there the window as big as an inner corner's is used (where it is bigger)
+    if outer.any():
+        sel = np.flatnonzero(outer & (corner_isotropy(gray, c, radius) < MIN_ISOTROPY))
+        if len(sel):
+            big_r = corner_windows(raw, board, outer_fraction=INNER_REACH)[sel]
+            grow = big_r > radius[sel]
+            sel, big_r = sel[grow], big_r[grow]
+            if len(sel):
+                c[sel] = _subpix(gray, raw[sel], big_r)
+                radius = radius.copy()
+                radius[sel] = big_r
+    wandered = np.linalg.norm(c - raw, axis=1) > np.maximum(radius, 0.5 * square)
+    c[wandered] = raw[wandered]
+    tol = np.maximum(GRID_TOLERANCE_PX, GRID_TOLERANCE_FRACTION * square)
+    bad = _inner_disagreement(c, board) > tol
+    if bad.any():
+        # predict the disagreeing corners from the others (their own positions are not trusted)
+        pred = _local_homography(c, board, 1, bad)[0][bad]
+        start = np.where(np.isfinite(pred), pred, raw[bad])
+        c[bad] = _subpix(gray, start, half[bad])
+        if np.any(_inner_disagreement(c, board) > tol):
+            return c, False
+    guarded = _guard_refinement(gray, raw, c, board, radius)
+    return (c, False) if guarded is None else (guarded, True)
+
+
+def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """How badly each point fails ``cornerSubPix``'s condition of a corner, 0 for a perfect one.
+
+    At a true corner ``q`` every image gradient ``g`` at a pixel ``p`` of the window is
+    orthogonal to ``p - q`` (edges run through the corner, flat areas have no gradient). The
+    misfit is ``sum((g . (p - q))^2) / sum(|g|^2 |p - q|^2)`` over the window of half-size
+    ``radius`` (pixels closer than 1 px to ``q`` left out): between 0 and 1.
+
+    Parameters
+    ----------
+    gray : (h, w) uint8
+    points : (M, 2) pixels
+    radius : (M,) int window half-sizes
+
+    Returns
+    -------
+    (M,) float64
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    radius = np.asarray(radius, dtype=int).reshape(-1)
+    out = np.ones(len(pts))
+    img = gray.astype(np.float32)
+    for r in np.unique(radius):
+        sel = np.flatnonzero(radius == r)
+        n = 2 * int(r) + 3
+        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
+        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
+        d = np.arange(n) - (n - 1) / 2.0
+        px, py = np.meshgrid(d, d)
+        keep = (np.hypot(px, py) >= 1.0)[1:-1, 1:-1]
+        gx, gy = gx[:, 1:-1, 1:-1][:, keep], gy[:, 1:-1, 1:-1][:, keep]
+        px, py = px[1:-1, 1:-1][keep], py[1:-1, 1:-1][keep]
+        num = np.sum((gx * px + gy * py) ** 2, axis=1)
+        den = np.sum((gx * gx + gy * gy) * (px * px + py * py), axis=1)
+        out[sel] = np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
+    return out
+
+
+def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Smaller over larger eigenvalue of the gradient structure tensor in each window (0..1).
+
+    A corner has strong gradients in two directions (about 0.3-1); an edge, or a corner smeared
+    by motion blur, in one direction only (near 0), where ``cornerSubPix`` is ill-conditioned.
+
+    Parameters
+    ----------
+    gray : (h, w) uint8
+    points : (M, 2) pixels
+    radius : (M,) int window half-sizes
+
+    Returns
+    -------
+    (M,) float64
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    radius = np.asarray(radius, dtype=int).reshape(-1)
+    out = np.zeros(len(pts))
+    img = gray.astype(np.float32)
+    for r in np.unique(radius):
+        sel = np.flatnonzero(radius == r)
+        n = 2 * int(r) + 3
+        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
+        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
+        gx, gy = gx[:, 1:-1, 1:-1], gy[:, 1:-1, 1:-1]
+        a, b, d = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
+        half_tr, det = 0.5 * (a + d), a * d - b * b
+        root = np.sqrt(np.maximum(half_tr ** 2 - det, 0.0))
+        out[sel] = np.where(half_tr > 0, (half_tr - root) / np.maximum(half_tr + root, 1e-300), 0.0)
+    return out
+
+
+def _outer_ring(board: Board) -> np.ndarray:
+    """(N,) bool: corners in the first or last row or column of the grid."""
+    j, i = np.divmod(np.arange(board.n_corners), board.cols)
+    return (j == 0) | (j == board.rows - 1) | (i == 0) | (i == board.cols - 1)
+
+
+def _inner_disagreement(c: np.ndarray, board: Board) -> np.ndarray:
+    """Distance from the 8-neighbour local homography for inner corners, 0 elsewhere."""
+    _, err, n = _local_homography(c, board, 1, None)
+    return np.where(n == 8, err, 0.0)
+
+
 def _grid_design(board: Board) -> np.ndarray | None:
     """Design matrix of a 2-D polynomial in the corner indices (cubic, or quadratic for small boards)."""
     j, i = np.mgrid[0:board.rows, 0:board.cols]
@@ -428,30 +774,24 @@ def _robust_grid_fit(corners: np.ndarray, board: Board, threshold: float):
 
 
 def _guard_refinement(gray: np.ndarray, raw: np.ndarray, refined: np.ndarray, board: Board,
-                      threshold: float = 0.2) -> np.ndarray | None:
+                      radius: np.ndarray, threshold: float = SMOOTH_GRID_TOLERANCE) -> np.ndarray | None:
     """Guard against bad corners on small or strongly foreshortened boards.
 
-    1. A corner that ``cornerSubPix`` moved farther than its window half-size left the
-       window it was asked to search: it goes back to the detector's position.
-    2. A corner off the smooth grid through the others (:func:`grid_residuals` above
+    A corner off the smooth grid through the others (:func:`grid_residuals` above
        ``threshold``) is replaced by the first of these that lies on the grid: the
        detector's position, or the grid's prediction refined by ``cornerSubPix``.
 
     Returns the corners, or None when some corner stays off the grid: the detection is then
     unreliable and is dropped rather than fed to a calibration.
     """
-    r = subpix_radius(refined, board)
     c = refined.copy()
-    wandered = np.linalg.norm(c - raw, axis=1) > r
-    c[wandered] = raw[wandered]
     fitted, res = _robust_grid_fit(c, board, threshold)
     bad = np.flatnonzero(res > threshold)
     if len(bad) == 0:
         return c
-    guess = fitted[bad].astype(np.float32).reshape(-1, 1, 2).copy()
-    cv2.cornerSubPix(gray, guess, (r, r), (-1, -1), SUBPIX_CRITERIA)
+    guess = _subpix(gray, fitted[bad], radius[bad])
     for k, idx in enumerate(bad):
-        for cand in (raw[idx], guess[k, 0].astype(np.float64)):
+        for cand in (raw[idx], guess[k]):
             trial = c.copy()
             trial[idx] = cand
             if _robust_grid_fit(trial, board, threshold)[1][idx] <= threshold:
@@ -468,14 +808,20 @@ def _near_border(corners: np.ndarray, size: tuple[int, int], margin: float) -> b
 
 
 def _finish(gray: np.ndarray, raw: np.ndarray, board: Board, border_margin: float,
-            repair: bool = False) -> Detection:
+            ros: bool = False) -> Detection:
+    """Order, refine and check a raw detection. ``ros=True`` refines as ROS does (one window,
+    :func:`subpix_radius`, no checks): the baseline."""
     h, w = gray.shape
     raw = order_corners(raw, board)
-    corners = refine_corners(gray, raw, board)
-    if repair:
-        corners = _guard_refinement(gray, raw, corners, board)
-        if corners is None:
-            return Detection(False, None, REASON_NO_BOARD, board, (w, h))
+    if ros:
+        corners = refine_corners(gray, raw, board)
+    else:
+        corners, ok = refine_corners_checked(gray, raw, board)
+        if not ok:
+            # a board running off the image is reported as such (ROS's rule), not as inconsistent
+            if _near_border(raw, (w, h), border_margin) or _near_border(corners, (w, h), border_margin):
+                return Detection(False, raw, REASON_AT_BORDER, board, (w, h))
+            return Detection(False, None, REASON_INCONSISTENT, board, (w, h))
     if _near_border(corners, (w, h), border_margin):
         return Detection(False, corners, REASON_AT_BORDER, board, (w, h))
     return Detection(True, corners, None, board, (w, h))
@@ -496,7 +842,7 @@ def detect_board(image, board: Board = DUCKIETOWN_BOARD, *,
 
     Saddle-point clusters (:func:`board_regions`) select at most two candidate regions;
     OpenCV's classic detector with ROS's flags runs only there; corners are ordered
-    (:func:`order_corners`) and refined (:func:`refine_corners`) on the full image.
+    (:func:`order_corners`) and refined (:func:`refine_corners_checked`) on the full image.
 
     Parameters
     ----------
@@ -528,8 +874,7 @@ def detect_board(image, board: Board = DUCKIETOWN_BOARD, *,
             if ok:  # pixel centres: big pixel k sits at (k + 0.5) / 2 - 0.5 in the region
                 raw = (raw.reshape(-1, 2).astype(np.float64) + 0.5) / 2.0 - 0.5
         if ok:
-            return _finish(gray, raw.reshape(-1, 2).astype(np.float64) + (x0, y0), board, border_margin,
-                           repair=True)
+            return _finish(gray, raw.reshape(-1, 2).astype(np.float64) + (x0, y0), board, border_margin)
     return Detection(False, None, REASON_NO_BOARD, board, (w, h))
 
 
@@ -538,7 +883,8 @@ def detect_board_ros(image, board: Board = DUCKIETOWN_BOARD, *,
     """The ROS ``camera_calibration`` baseline: the classic detector on the full frame.
 
     ``findChessboardCorners(ADAPTIVE_THRESH | NORMALIZE_IMAGE | FAST_CHECK)`` on the whole
-    image, then the same ordering, ``cornerSubPix`` and border rule as :func:`detect_board`.
+    image, then the same ordering and border rule as :func:`detect_board` and ROS's refinement
+    (one ``cornerSubPix`` window of :func:`subpix_radius` for all corners, no checks).
     Kept as the reference for benchmarks and tests; can take hundreds of milliseconds on a
     cluttered frame without a board.
     """
@@ -548,7 +894,7 @@ def detect_board_ros(image, board: Board = DUCKIETOWN_BOARD, *,
     ok, raw = cv2.findChessboardCorners(gray, board.pattern_size, flags=ROS_FLAGS)
     if not ok:
         return Detection(False, None, REASON_NO_BOARD, board, (w, h))
-    return _finish(gray, raw.reshape(-1, 2).astype(np.float64), board, border_margin)
+    return _finish(gray, raw.reshape(-1, 2).astype(np.float64), board, border_margin, ros=True)
 
 
 def detect_board_still(image, board: Board = DUCKIETOWN_BOARD, *,

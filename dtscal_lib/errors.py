@@ -42,6 +42,7 @@ class Reason(StrEnum):
     BAD_FRAME = "bad_frame"                  #: any other frame the detector refuses
     NO_BOARD = "no_board"                    #: no board in view
     AT_BORDER = "at_border"                  #: board found, but touching the image border
+    INCONSISTENT_GRID = "inconsistent_grid"  #: a corner disagrees with its neighbours' local grid
     # samples and views
     NOT_NEW_COVERAGE = "not_new_coverage"    #: too close to a sample already kept
     OUTLIER_VIEW = "outlier_view"            #: fits far worse than the other views

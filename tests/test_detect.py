@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 from ci import missing
+from detect_truth import canonical_truth
 
 from dtscal_lib.boards import DUCKIETOWN_BOARD, Board
 from dtscal_lib.detect import (
@@ -58,8 +60,10 @@ def board_frames(renderer):
     return out
 
 
-def expected_order(truth: np.ndarray, board: Board = B) -> np.ndarray:
-    return order_corners(truth, board)
+def expected_order(frame, board: Board = B) -> np.ndarray:
+    """The truth of a rendered frame in the detector's canonical order, derived from the pose
+    (tests/detect_truth.py), not by ``order_corners``, the function under test."""
+    return canonical_truth(frame.corners, frame.rvec, frame.tvec, board)
 
 
 # --------------------------------------------------------------------------- accuracy
@@ -71,7 +75,7 @@ def test_finds_every_realistic_board_with_subpixel_accuracy(board_frames):
         assert d.reason is None and bool(d) is True
         assert d.corners.shape == (35, 2) and d.corners.dtype == np.float64
         assert d.image_size == (640, 480)
-        errors.append(np.linalg.norm(d.corners - expected_order(f.corners), axis=1))
+        errors.append(np.linalg.norm(d.corners - expected_order(f), axis=1))
     e = np.concatenate(errors)
     assert e.max() < 0.6, f"worst corner error {e.max():.3f} px"
     assert np.median(e) < 0.2, f"median corner error {np.median(e):.3f} px"
@@ -106,7 +110,7 @@ def test_other_board_sizes(renderer):
     f = r9.render(r, t, scenes.clutter_image(rng, kind="office"), rng)
     d = detect_board(f.image, board)
     assert d.found and d.board == board and d.corners.shape == (54, 2)
-    assert np.linalg.norm(d.corners - order_corners(f.corners, board), axis=1).max() < 0.6
+    assert np.linalg.norm(d.corners - expected_order(f, board), axis=1).max() < 0.6
 
 
 # --------------------------------------------------------------------------- ROS rules
@@ -198,7 +202,7 @@ def test_board_seen_edge_on_like_on_the_floor(renderer, tilt):
     f = renderer.render(r, t, scenes.clutter_image(rng, kind="office"), rng, blur=0.8, noise=2.0)
     d = detect_board(f.image)
     assert d.found
-    assert np.linalg.norm(d.corners - order_corners(f.corners), axis=1).max() < 0.6
+    assert np.linalg.norm(d.corners - expected_order(f), axis=1).max() < 0.6
 
 
 def test_subpix_radius_is_half_the_smallest_spacing_at_least_two():
@@ -324,7 +328,7 @@ def test_synthetic_session_recording():
             visible += 1
             found += d.found
         if d.corners is not None:
-            exact = order_corners(np.asarray(t["corners"], dtype=np.float64))
+            exact = canonical_truth(t["corners"], t["rvec"], t["tvec"], B)
             worst = max(worst, float(np.linalg.norm(d.corners - exact, axis=1).max()))
     assert visible > 15
     assert found >= 0.95 * visible, f"found {found} of {visible} fully visible boards"
@@ -345,3 +349,26 @@ def test_detect_board_still_finds_the_rectified_extrinsic_capture_and_nothing_in
     assert det.found and det.corners.shape == (35, 2)
     blank = np.full((480, 640), 127, np.uint8)
     assert detect_board_still(blank).reason == "no_board"
+
+
+def test_order_corners_agrees_with_the_order_derived_from_the_pose():
+    """order_corners against the independent rule of tests/detect_truth.py, over random poses seen
+    from the front and from behind, any roll, and every traversal the classic detector may return."""
+    rng = np.random.default_rng(11)
+    K = np.array([[310.0, 0, 320], [0, 310.0, 240], [0, 0, 1]])
+    obj = B.object_points()
+    checked = 0
+    for _ in range(300):
+        axis = rng.normal(size=3)
+        rvec = axis / np.linalg.norm(axis) * rng.uniform(0, np.pi)
+        R = cv2.Rodrigues(rvec)[0]
+        centre = np.array([(B.cols - 1) * B.square / 2, (B.rows - 1) * B.square / 2, 0.0])
+        tvec = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), 0.45]) - R @ centre
+        if abs(R[2, 2]) < 0.3:  # nearly edge-on: no usable image of the grid
+            continue
+        uv = cv2.projectPoints(obj, rvec, tvec, K, None)[0].reshape(B.rows, B.cols, 2)
+        expected = canonical_truth(uv.reshape(-1, 2), rvec, tvec, B)
+        for grid in (uv, uv[::-1], uv[:, ::-1], uv[::-1, ::-1]):
+            np.testing.assert_allclose(order_corners(grid.reshape(-1, 2), B), expected)
+        checked += 1
+    assert checked > 150
