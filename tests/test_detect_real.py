@@ -49,8 +49,8 @@ def _object_points() -> np.ndarray:
 
 def _calibrate(corners: list[np.ndarray]) -> dict:
     obj = _object_points()
-    rms, K, _, _, _ = cv2.calibrateCamera([obj] * len(corners), [c.astype(np.float32).reshape(-1, 1, 2) for c in corners],
-                                          (640, 480), None, None, flags=cv2.CALIB_FIX_K3)
+    pixels = [c.astype(np.float32).reshape(-1, 1, 2) for c in corners]
+    rms, K, _, _, _ = cv2.calibrateCamera([obj] * len(corners), pixels, (640, 480), None, None, flags=cv2.CALIB_FIX_K3)
     return {"rms": float(rms), "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2], "views": len(corners)}
 
 
