@@ -100,13 +100,13 @@ class SolverProcess:
 
 
 def assess_quality(result):
-    """HOOK for the calibration's verdict: ``CalibrationResult.quality()`` (``dtscal_lib.quality``,
-    issue 7b) when this kit has it, else None. A failing assessment gives its message (a str)."""
-    fn = getattr(result, "quality", None)
-    if fn is None:
-        return None
+    """The calibration's verdict, ``CalibrationResult.quality()`` (:mod:`dtscal_lib.quality`).
+
+    A failing assessment gives its message (a str), never an exception: the verdict is extra
+    information and must never lose the calibration.
+    """
     try:
-        return fn()
+        return result.quality()
     except Exception as exc:  # the verdict is extra information: it must never lose the calibration
         return f"no verdict ({type(exc).__name__}: {exc})"
 
