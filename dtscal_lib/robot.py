@@ -22,9 +22,8 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
-import yaml
 
-from . import calib_files
+from . import calib_files, safe_yaml
 from .errors import DtscalError
 
 #: where the robot keeps its calibrations
@@ -131,13 +130,14 @@ def commit_extrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
     robot = _robot(robot)
     path = Path(calib_file)
     try:
-        body = path.read_bytes()
-        doc = yaml.safe_load(body)
+        text = safe_yaml.read_text_file(path)  # regular files only, within the size limit
+        body = text.encode("utf-8")
+        doc = safe_yaml.load_yaml_text(text, str(path))
         if not isinstance(doc, dict) or "homography" not in doc:
             raise CommitError(f"{path} is not an extrinsic file (no homography:); nothing was sent")
         if "version" not in doc:
             calib_files.load_extrinsics(path)  # validate the classic file before sending it
-    except (OSError, yaml.YAMLError) as exc:
+    except OSError as exc:
         raise CommitError(f"cannot read {path} ({exc}); nothing was sent") from None
     except CommitError:
         raise
