@@ -631,6 +631,19 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     return (c, False) if guarded is None else (guarded, True)
 
 
+def _window_gradients(gray: np.ndarray, pts: np.ndarray, radius):
+    """Per group of equal window half-size: ``(indices, n, gx, gy)``, the image gradients of an
+    ``n x n`` patch (``n = 2 radius + 3``) around each of those points, sub-pixel centred."""
+    radius = np.asarray(radius, dtype=int).reshape(-1)
+    img = gray.astype(np.float32)
+    for r in np.unique(radius):
+        sel = np.flatnonzero(radius == r)
+        n = 2 * int(r) + 3
+        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
+        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
+        yield sel, n, gx, gy
+
+
 def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """How badly each point fails ``cornerSubPix``'s condition of a corner, 0 for a perfect one.
 
@@ -650,14 +663,8 @@ def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     (M,) float64
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    radius = np.asarray(radius, dtype=int).reshape(-1)
     out = np.ones(len(pts))
-    img = gray.astype(np.float32)
-    for r in np.unique(radius):
-        sel = np.flatnonzero(radius == r)
-        n = 2 * int(r) + 3
-        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
-        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
+    for sel, n, gx, gy in _window_gradients(gray, pts, radius):
         d = np.arange(n) - (n - 1) / 2.0
         px, py = np.meshgrid(d, d)
         keep = (np.hypot(px, py) >= 1.0)[1:-1, 1:-1]
@@ -686,14 +693,8 @@ def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) ->
     (M,) float64
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    radius = np.asarray(radius, dtype=int).reshape(-1)
     out = np.zeros(len(pts))
-    img = gray.astype(np.float32)
-    for r in np.unique(radius):
-        sel = np.flatnonzero(radius == r)
-        n = 2 * int(r) + 3
-        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
-        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
+    for sel, _, gx, gy in _window_gradients(gray, pts, radius):
         gx, gy = gx[:, 1:-1, 1:-1], gy[:, 1:-1, 1:-1]
         a, b, d = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
         half_tr, det = 0.5 * (a + d), a * d - b * b
