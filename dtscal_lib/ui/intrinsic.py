@@ -174,15 +174,7 @@ class LiveCalibrator:
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
         self.state = st.state
-        bad = ", ".join(f"{k} {v}" for k, v in sorted({**st.bad, **self.bad}.items()))
-        text = {"connecting": f"connecting to {self.spec} ...",
-                "running": f"live: {self.spec}",
-                "ended": f"source ended: {st.message}. Every sample is kept; RECONNECT to go on.",
-                "error": f"source lost: {st.message}. Every sample is kept; RECONNECT when it is back."}.get(
-            st.state, st.message)
-        if bad:
-            text += f" (skipped frames: {bad})"
-        self.status.value = render.message_html(text, "error" if st.state in ("ended", "error") else "info")
+        self.status.value = render.source_status_html(self.spec, st, {**st.bad, **self.bad}, "Every sample is kept")
 
     def _on_frame(self, frame) -> bool | None:
         """The loop body: detect, offer to coverage, draw, encode, publish (False: frame skipped)."""

@@ -122,6 +122,22 @@ def message_html(text: str, kind: str = "info") -> str:
     return f'<div class="dtscal-msg dtscal-{kind}" style="color:{colour}">{html.escape(text)}</div>'
 
 
+def source_status_html(spec: str, status, bad: dict, kept: str) -> str:
+    """The status line of a live tool for a :class:`~dtscal_lib.sources.live.LiveStatus`.
+
+    ``kept`` says what survives a lost source (``"Every sample is kept"``); ``bad`` counts the
+    skipped frames by reason.
+    """
+    text = {"connecting": f"connecting to {spec} ...",
+            "running": f"live: {spec}",
+            "ended": f"source ended: {status.message}. {kept}; RECONNECT to go on.",
+            "error": f"source lost: {status.message}. {kept}; RECONNECT when it is back."}.get(
+        status.state, status.message)
+    if bad:
+        text += " (skipped frames: " + ", ".join(f"{k} {v}" for k, v in sorted(bad.items())) + ")"
+    return message_html(text, "error" if status.state in ("ended", "error") else "info")
+
+
 def top_view(ground_true: np.ndarray, ground_fit: np.ndarray | None, *, px_per_m: float = 1600.0,
              x_range=(0.16, 0.36), y_range=(-0.13, 0.13), magnify: float = 20.0) -> np.ndarray:
     """A top view of the board on the ground: true corner positions (circles) and where the
