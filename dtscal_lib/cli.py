@@ -316,10 +316,20 @@ def build_parser() -> argparse.ArgumentParser:
                     help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
     sp.set_defaults(func=cmd_course)
 
-    from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
-
-    add_grade_parser(sub)
+    try:
+        from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
+    except ModuleNotFoundError:  # the student hand-out ships without the grader
+        sp = sub.add_parser("grade", help="grading is part of the instructor's kit, not of this hand-out")
+        sp.set_defaults(func=_no_grader)
+    else:
+        add_grade_parser(sub)
     return p
+
+
+def _no_grader(args) -> int:
+    print("dtscal: error: this course is a student hand-out, which has no autograder; your instructor grades "
+          "with the instructor's kit. To check your work, run the self-checks in your notebooks.", file=sys.stderr)
+    return 2
 
 
 def release_args(sp) -> None:

@@ -6,7 +6,7 @@ or a wrong calibration, after minutes of frame decoding. Each message names the
 command-line flag and the library argument, says what was wrong and what to give.
 
 >>> board_from_flags("7x5", 0.031).describe()
-'7x5 inner corners, 0.031 squares'
+'7x5 inner corners, 31 mm squares'
 >>> check_image_size((640, 480))
 (640, 480)
 """

@@ -31,6 +31,7 @@ from .. import duckietown as dt
 from ..boards import Board, ground_points
 from ..camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
 from ..camera import undistort_normalized as _newton_undistort
+from ..homography import apply_homography
 from .projection import K_SKEWED
 
 __all__ = ["Mistake", "diagnose", "diagnose_function", "probe_args", "MISTAKES", "FUNCTIONS"]
@@ -80,8 +81,10 @@ def _views(K, n, seed):
 
 
 def _homog(H, pts, divide=True):
-    p = np.column_stack([pts, np.ones(len(pts))]) @ np.asarray(H, float).T
-    return p[:, :2] / p[:, 2:3] if divide else p[:, :2]
+    """``H`` applied to ``pts``: the library's (right) answer, or the mistake of keeping x and y undivided."""
+    if divide:
+        return apply_homography(np.asarray(H, float), pts)
+    return (np.column_stack([pts, np.ones(len(pts))]) @ np.asarray(H, float).T)[:, :2]
 
 
 def _hartley(p):
