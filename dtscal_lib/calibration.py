@@ -650,6 +650,13 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
 
 #: iterations each starting point gets before the better one is refined to convergence
 _START_TRIAL_ITERATIONS = 8
+#: the closed form is trusted alone when its focal lengths are within this fraction of OpenCV's start
+_START_AGREEMENT = 0.25
+
+
+def _focal_disagreement(K_a: np.ndarray, K_b: np.ndarray) -> float:
+    """Largest relative difference of the two starts' focal lengths."""
+    return float(max(abs(K_a[i, i] - K_b[i, i]) / max(K_a[i, i], K_b[i, i]) for i in (0, 1)))
 
 
 def _refine_from_best_start(problem: "_Problem", Hs, obj, img, size, skew: bool, dist_idx):
@@ -660,8 +667,9 @@ def _refine_from_best_start(problem: "_Problem", Hs, obj, img, size, skew: bool,
     first 40 samples of the recorded session), and the refinement from there ends in a local
     minimum (RMS 0.59 px instead of 0.064 px) after a hundred slow iterations. OpenCV's start
     (principal point at the centre, focal lengths from vanishing points) is cruder but not
-    misled that way. Each start gets a few iterations; the one with the lower cost then goes on to
-    convergence, so on ordinary data (both starts reach the same minimum) the result is unchanged.
+    misled that way. When the two starts disagree on the focal length by more than
+    :data:`_START_AGREEMENT`, each gets a few iterations and the one with the lower cost goes on to
+    convergence; otherwise the closed form is the start, as it always was.
     """
     starts = []
     K_zhang = zhang_closed_form(Hs, size, skew=skew)
@@ -672,6 +680,8 @@ def _refine_from_best_start(problem: "_Problem", Hs, obj, img, size, skew: bool,
     except CalibrationError:
         if not starts:
             raise
+    if len(starts) == 2 and _focal_disagreement(*starts) <= _START_AGREEMENT:
+        starts = starts[:1]  # the usual case: the closed form is where OpenCV's start points, so use it alone
     trials = []
     for K0 in starts:
         theta0 = np.concatenate([[K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2]], [K0[0, 1]] if skew else [],
