@@ -21,8 +21,6 @@ from nbtools import ROOT
 CONFIGS = {
     "generic-kernel-1-thread": {"OPENBLAS_CORETYPE": "Prescott", "OPENBLAS_NUM_THREADS": "1",
                                 "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MKL_CBWR": "COMPATIBLE"},
-    "haswell-kernel-2-threads": {"OPENBLAS_CORETYPE": "Haswell", "OPENBLAS_NUM_THREADS": "2",
-                                 "OMP_NUM_THREADS": "2", "MKL_NUM_THREADS": "2"},
 }
 
 
