@@ -112,13 +112,9 @@ def _scroll_to(locator) -> None:
         print(f"(screenshot framing skipped: {type(exc).__name__})")
 
 
-def test_notebook_06_calibrates_commits_and_saves_extrinsics_in_the_browser(lab, tmp_path):
-    url, token, _root = lab
-    # kept after the run (pytest rotates its own temporary folders): the path is printed
-    shots = Path(tempfile.mkdtemp(prefix="dtscal-browser-screenshots-"))
-    print(f"\nscreenshots: {shots}")
-    calib_dir = tmp_path / "calibrations"
-    truth = datasets.load_truth()
+def _drive_notebook_06(url: str, token: str, shots: Path, calib_dir: Path) -> list:
+    """One browser session: run notebook 06, CALIBRATE, COMMIT, extrinsic SAVE; returns the latencies (ms)."""
+    shots.mkdir(parents=True, exist_ok=True)
     with _playwright()() as p:
         browser = launch_chromium(p)
         page = browser.new_page(viewport={"width": 1400, "height": 1000})
@@ -171,6 +167,25 @@ def test_notebook_06_calibrates_commits_and_saves_extrinsics_in_the_browser(lab,
         finally:
             browser.close()
 
+    return lat
+
+
+def test_notebook_06_calibrates_commits_and_saves_extrinsics_in_the_browser(lab, tmp_path):
+    url, token, _root = lab
+    # kept after the run (pytest rotates its own temporary folders): the path is printed
+    shots = Path(tempfile.mkdtemp(prefix="dtscal-browser-screenshots-"))
+    print(f"\nscreenshots: {shots}")
+    calib_dir = tmp_path / "calibrations"
+    truth = datasets.load_truth()
+    lat = None
+    for attempt in (1, 2):  # the live page re-renders with every frame: one retry on a browser-side race
+        try:
+            lat = _drive_notebook_06(url, token, shots / f"attempt{attempt}", calib_dir)
+            break
+        except Exception as exc:
+            if attempt == 2:
+                raise
+            print(f"browser attempt 1 failed ({type(exc).__name__}: {str(exc)[:200]}); retrying once")
     K_true = np.asarray(truth["camera"]["K"])
     calib = calib_files.load_intrinsics(calib_dir / "camera_intrinsic" / "synthbot.yaml")
     for name, ij in (("fx", (0, 0)), ("fy", (1, 1)), ("cx", (0, 2)), ("cy", (1, 2))):
