@@ -383,7 +383,8 @@ def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIET
 OUTER_SQUARE_FRACTION = 0.35
 #: an inner corner's window reaches at most this fraction of the way to its squares' far edges
 INNER_REACH = 0.7
-#: and stays this many pixels short of any far edge (edge blur, start error of the detector)
+#: and stays this many pixels short of any far edge (edge blur, start error of the detector), plus
+#: :data:`REFINE_SIGMA` (the smoothing widens every far edge by about that much)
 WINDOW_MARGIN_PX = 1.5
 #: an outer corner whose small window sees less isotropic gradients than this (corner_isotropy) is
 #: refined with a window as big as an inner corner's (motion blur)
@@ -427,7 +428,7 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
     window half-size ``r`` is therefore limited, for each of the four sides, so that the
     window's reach toward that side's far edge, ``r (|n_x| + |n_y|)`` for the edge's unit
     normal ``n``, stays below the edge's distance times :data:`INNER_REACH`, minus
-    :data:`WINDOW_MARGIN_PX`. On the outer ring of the grid the outward squares may be
+    :data:`WINDOW_MARGIN_PX` and :data:`REFINE_SIGMA`. On the outer ring of the grid the outward squares may be
     cut narrow: their far edge is assumed at :data:`OUTER_SQUARE_FRACTION` of the opposite
     square's width. The local geometry comes from the corner's neighbours, so perspective
     (near squares big, far squares small) gives each corner its own window.
@@ -447,9 +448,9 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
     >>> b = parse_board("4x3")
     >>> grid = np.mgrid[0:3, 0:4][::-1].transpose(1, 2, 0).reshape(-1, 2) * 30.0 + 100
     >>> corner_windows(grid, b).reshape(3, 4)
-    array([[ 9,  9,  9,  9],
-           [ 9, 19, 19,  9],
-           [ 9,  9,  9,  9]])
+    array([[ 8,  8,  8,  8],
+           [ 8, 18, 18,  8],
+           [ 8,  8,  8,  8]])
     """
     right, left, down, up = _neighbour_vectors(corners, board)
 
@@ -469,7 +470,7 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
         outer = np.isnan(dist)
         dist_opp = np.abs((opposite * normal).sum(axis=-1))
         reach = np.where(outer, outer_fraction * dist_opp, INNER_REACH * dist)
-        room = np.minimum(room, (reach - WINDOW_MARGIN_PX) / support)
+        room = np.minimum(room, (reach - WINDOW_MARGIN_PX - REFINE_SIGMA) / support)
     return np.maximum(MIN_WINDOW, np.floor(room)).astype(int).ravel()
 
 
