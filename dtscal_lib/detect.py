@@ -612,7 +612,11 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     """
     raw = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
     radius = corner_windows(raw, board)
-    gray = refine_image(gray, raw, 2.0 * float(corner_windows(raw, board, outer_fraction=INNER_REACH).max()) + 2.0)
+    # corners move by less than a square and windows are smaller than a square: smooth that far
+    g = raw.reshape(board.rows, board.cols, 2)
+    spacing = max(float(np.linalg.norm(np.diff(g, axis=1), axis=2).max(initial=0.0)),
+                  float(np.linalg.norm(np.diff(g, axis=0), axis=2).max(initial=0.0)))
+    gray = refine_image(gray, raw, 2.0 * spacing + 2.0)
     half = np.maximum(MIN_WINDOW, radius // 2)
     square = _local_square(raw, board)
     c = _subpix(gray, raw, radius)
@@ -635,7 +639,8 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     # a small outer window on a motion-blurred corner sees edges in one direction only and cannot
     # locate it: there the window as big as an inner corner's is used (where it is bigger)
     if outer.any():
-        sel = np.flatnonzero(outer & (corner_isotropy(gray, c, radius) < MIN_ISOTROPY))
+        sel = np.flatnonzero(outer)
+        sel = sel[corner_isotropy(gray, c[sel], radius[sel]) < MIN_ISOTROPY]
         if len(sel):
             big_r = corner_windows(raw, board, outer_fraction=INNER_REACH)[sel]
             grow = big_r > radius[sel]
@@ -663,7 +668,7 @@ def _window_gradients(gray: np.ndarray, pts: np.ndarray, radius):
     """Per group of equal window half-size: ``(indices, n, gx, gy)``, the image gradients of an
     ``n x n`` patch (``n = 2 radius + 3``) around each of those points, sub-pixel centred."""
     radius = np.asarray(radius, dtype=int).reshape(-1)
-    img = gray.astype(np.float32)
+    img = gray if gray.dtype == np.float32 else gray.astype(np.float32)
     for r in np.unique(radius):
         sel = np.flatnonzero(radius == r)
         n = 2 * int(r) + 3
