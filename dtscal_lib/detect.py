@@ -383,8 +383,7 @@ def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIET
 OUTER_SQUARE_FRACTION = 0.35
 #: an inner corner's window reaches at most this fraction of the way to its squares' far edges
 INNER_REACH = 0.7
-#: and stays this many pixels short of any far edge (edge blur, start error of the detector), plus
-#: :data:`REFINE_SIGMA` (the smoothing widens every far edge by about that much)
+#: and stays this many pixels short of any far edge (edge blur, start error of the detector)
 WINDOW_MARGIN_PX = 1.5
 #: an outer corner whose small window sees less isotropic gradients than this (corner_isotropy) is
 #: refined with a window as big as an inner corner's (motion blur)
@@ -394,8 +393,11 @@ MIN_ISOTROPY = 0.4
 MIN_WINDOW = 4
 #: stopping rule of the kit's refinement: 30 iterations or a step below 0.01 px (ROS: 30, 0.1 px)
 REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
-#: the kit refines on the image smoothed by a Gaussian of this sigma, pixels (see :func:`refine_image`)
+#: the kit's last refinement step works on the image smoothed by a Gaussian of this sigma, pixels
+#: (see :func:`polish_corners`)
 REFINE_SIGMA = 1.0
+#: a corner that the smoothed step would move this far (pixels) or more keeps its unsmoothed position
+POLISH_MAX_MOVE_PX = 0.1
 #: a corner farther than this from the local homography of its neighbours (in pixels, or this
 #: fraction of its local square size, whichever is larger) disagrees with the grid
 GRID_TOLERANCE_PX = 0.75
@@ -419,7 +421,7 @@ def _neighbour_vectors(corners: np.ndarray, board: Board):
 
 
 def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
-                   outer_fraction: float = OUTER_SQUARE_FRACTION) -> np.ndarray:
+                   outer_fraction: float = OUTER_SQUARE_FRACTION, margin: float | None = None) -> np.ndarray:
     """Per-corner ``cornerSubPix`` window half-size that stays inside the corner's own four squares.
 
     ``cornerSubPix`` treats every intensity edge in its (square, axis-aligned) window as an
@@ -428,7 +430,7 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
     window half-size ``r`` is therefore limited, for each of the four sides, so that the
     window's reach toward that side's far edge, ``r (|n_x| + |n_y|)`` for the edge's unit
     normal ``n``, stays below the edge's distance times :data:`INNER_REACH`, minus
-    :data:`WINDOW_MARGIN_PX` and :data:`REFINE_SIGMA`. On the outer ring of the grid the outward squares may be
+    ``margin``. On the outer ring of the grid the outward squares may be
     cut narrow: their far edge is assumed at :data:`OUTER_SQUARE_FRACTION` of the opposite
     square's width. The local geometry comes from the corner's neighbours, so perspective
     (near squares big, far squares small) gives each corner its own window.
@@ -437,6 +439,7 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
     ----------
     corners : (N, 2) pixels, board row-major order
     outer_fraction : assumed width of the outward squares of the outer ring, in squares
+    margin : pixels the window stays short of a far edge (default :data:`WINDOW_MARGIN_PX`)
 
     Returns
     -------
@@ -448,10 +451,11 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
     >>> b = parse_board("4x3")
     >>> grid = np.mgrid[0:3, 0:4][::-1].transpose(1, 2, 0).reshape(-1, 2) * 30.0 + 100
     >>> corner_windows(grid, b).reshape(3, 4)
-    array([[ 8,  8,  8,  8],
-           [ 8, 18, 18,  8],
-           [ 8,  8,  8,  8]])
+    array([[ 9,  9,  9,  9],
+           [ 9, 19, 19,  9],
+           [ 9,  9,  9,  9]])
     """
+    margin = WINDOW_MARGIN_PX if margin is None else float(margin)
     right, left, down, up = _neighbour_vectors(corners, board)
 
     def unit(a, b):
@@ -470,7 +474,7 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
         outer = np.isnan(dist)
         dist_opp = np.abs((opposite * normal).sum(axis=-1))
         reach = np.where(outer, outer_fraction * dist_opp, INNER_REACH * dist)
-        room = np.minimum(room, (reach - WINDOW_MARGIN_PX - REFINE_SIGMA) / support)
+        room = np.minimum(room, (reach - margin) / support)
     return np.maximum(MIN_WINDOW, np.floor(room)).astype(int).ravel()
 
 
@@ -565,15 +569,8 @@ def _local_square(corners: np.ndarray, board: Board) -> np.ndarray:
 
 
 def refine_image(gray: np.ndarray, corners: np.ndarray, reach: float, sigma: float | None = None) -> np.ndarray:
-    """The image the kit's refinement works on: float32, smoothed by a Gaussian of ``sigma`` pixels
-    around the corners (within ``reach`` pixels of their bounding box; elsewhere as is).
-
-    ``cornerSubPix`` samples its window with bilinear interpolation at the sub-pixel start and
-    differentiates with central differences; on sharp edges both depend on where the edge falls
-    within a pixel, and the corner comes out biased by a few hundredths of a pixel. Smoothing does
-    not move the corner of a checkerboard (its intensity is point-symmetric about the corner), but
-    makes the edges smooth enough for the interpolation and the differences to be accurate.
-    """
+    """The image of :func:`polish_corners`: float32, smoothed by a Gaussian of ``sigma`` pixels
+    (default :data:`REFINE_SIGMA`) within ``reach`` pixels of the corners' bounding box, as is elsewhere."""
     img = gray.astype(np.float32)
     sigma = REFINE_SIGMA if sigma is None else float(sigma)
     if sigma <= 0:
@@ -612,11 +609,7 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     """
     raw = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
     radius = corner_windows(raw, board)
-    # corners move by less than a square and windows are smaller than a square: smooth that far
-    g = raw.reshape(board.rows, board.cols, 2)
-    spacing = max(float(np.linalg.norm(np.diff(g, axis=1), axis=2).max(initial=0.0)),
-                  float(np.linalg.norm(np.diff(g, axis=0), axis=2).max(initial=0.0)))
-    gray = refine_image(gray, raw, 2.0 * spacing + 2.0)
+    grown = np.zeros(len(raw), dtype=bool)
     half = np.maximum(MIN_WINDOW, radius // 2)
     square = _local_square(raw, board)
     c = _subpix(gray, raw, radius)
@@ -649,6 +642,7 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
                 c[sel] = _subpix(gray, raw[sel], big_r)
                 radius = radius.copy()
                 radius[sel] = big_r
+                grown[sel] = True
     wandered = np.linalg.norm(c - raw, axis=1) > np.maximum(radius, 0.5 * square)
     c[wandered] = raw[wandered]
     tol = np.maximum(GRID_TOLERANCE_PX, GRID_TOLERANCE_FRACTION * square)
@@ -661,7 +655,54 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
         if np.any(_inner_disagreement(c, board) > tol):
             return c, False
     guarded = _guard_refinement(gray, raw, c, board, radius)
-    return (c, False) if guarded is None else (guarded, True)
+    if guarded is None:
+        return c, False
+    return polish_corners(gray, guarded, board, skip=grown), True
+
+
+def polish_corners(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
+                   skip: np.ndarray | None = None, sigma: float | None = None) -> np.ndarray:
+    """Last step of the kit's refinement: ``cornerSubPix`` once more, on the smoothed image.
+
+    ``cornerSubPix`` samples its window with bilinear interpolation at the sub-pixel position and
+    differentiates with central differences. On sharp edges both depend on where an edge falls
+    within a pixel, and the corner comes out off by a few hundredths of a pixel (0.03-0.06 px median
+    on the stress set, the same with or without sensor noise). Smoothing the image with a Gaussian of
+    :data:`REFINE_SIGMA` (:func:`refine_image`) does not move a checkerboard corner (the pattern is
+    point-symmetric about it) but makes the edges smooth enough for both to be accurate.
+
+    Each corner is refined again from where the checked refinement left it, with a window that stays
+    ``sigma`` more short of its squares' far edges (the smoothing widens them:
+    :func:`corner_windows` with ``margin = WINDOW_MARGIN_PX + sigma``). A polished corner that moved
+    by :data:`POLISH_MAX_MOVE_PX` or more is not a small bias corrected but an ill-conditioned window
+    (a small window on a heavily motion-blurred corner): it keeps its unsmoothed position, as do the
+    corners in ``skip`` (refined with a grown window for motion blur).
+
+    Parameters
+    ----------
+    gray : (h, w) uint8
+    corners : (N, 2) pixels, board row-major order, already refined
+    skip : optional (N,) bool, corners to leave as they are
+
+    Returns
+    -------
+    (N, 2) float64 pixels
+    """
+    sigma = REFINE_SIGMA if sigma is None else float(sigma)
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 2).copy()
+    if sigma <= 0:
+        return c
+    g = c.reshape(board.rows, board.cols, 2)
+    spacing = max(float(np.linalg.norm(np.diff(g, axis=1), axis=2).max(initial=0.0)),
+                  float(np.linalg.norm(np.diff(g, axis=0), axis=2).max(initial=0.0)))
+    img = refine_image(gray, c, spacing + 2.0, sigma)  # windows are smaller than a square
+    radius = corner_windows(c, board, margin=WINDOW_MARGIN_PX + sigma)
+    p = _subpix(img, c, radius)
+    use = np.linalg.norm(p - c, axis=1) < POLISH_MAX_MOVE_PX
+    if skip is not None:
+        use &= ~np.asarray(skip, dtype=bool)
+    c[use] = p[use]
+    return c
 
 
 def _window_gradients(gray: np.ndarray, pts: np.ndarray, radius):
