@@ -553,12 +553,16 @@ def _local_homography(c: np.ndarray, board: Board, reach: int, exclude: np.ndarr
     r1 = np.stack([x, y, one, zero, zero, zero, -u * x, -u * y, -u], axis=-1)
     r2 = np.stack([zero, zero, zero, x, y, one, -v * x, -v * y, -v], axis=-1)
     A = np.concatenate([r1, r2], axis=1) * np.concatenate([valid, valid], axis=1)[..., None]
-    h = np.linalg.eigh(np.einsum("nki,nkj->nij", A, A))[1][:, :, 0]  # least-squares null vector
+    # least squares with the homography's last element fixed to 1 (the neighbours' centre maps to a
+    # finite point): an 8x8 solve per corner, ten times faster than the null vector by eigh; a tiny
+    # ridge keeps corners with too few neighbours (n < 4, no prediction) from making it singular
+    M = A.transpose(0, 2, 1) @ A
+    ridge = 1e-12 * (np.trace(M, axis1=1, axis2=2)[:, None, None] + 1.0) * np.eye(8)
+    h = np.linalg.solve(M[:, :8, :8] + ridge, -M[:, :8, 8:9])[..., 0]
     # evaluate at the corner's own index, offset (0, 0)
-    w = h[:, 8:9]
-    ok = np.abs(w[:, 0]) > 1e-12
+    ok = n >= 4
     pred = np.full_like(c, np.nan)
-    pred[ok] = (h[ok][:, [2, 5]] / w[ok]) * scale[ok, None] + centre[ok]
+    pred[ok] = h[ok][:, [2, 5]] * scale[ok, None] + centre[ok]
     return pred, np.linalg.norm(pred - c, axis=1), n
 
 
