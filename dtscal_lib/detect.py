@@ -35,6 +35,9 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
    its 8 neighbours' homography (:func:`grid_disagreement`; re-refined with half the window,
    or the view is rejected as ``"inconsistent_grid"``), and a corner off a smooth (cubic)
    grid through the others goes back to the detector's position or is dropped with the view.
+   Last, every corner is polished once more on the image smoothed by a 1 px Gaussian
+   (:func:`polish_corners`), which removes ``cornerSubPix``'s few-hundredths-of-a-pixel bias on
+   sharp edges.
 
 A frame without any candidate costs only steps 1-2 (about 1.5-3 ms at 640x480); see
 ``benchmarks/bench_detect.py`` for the measured figures and ratios against the ROS call,
@@ -606,6 +609,8 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
        (:func:`grid_residuals` above :data:`SMOOTH_GRID_TOLERANCE`) goes back to the
        detector's position or the grid's refined prediction, whichever lies on the grid;
        otherwise ``ok`` is False.
+    4. :func:`polish_corners`: once more on the smoothed image (corners refined with a grown
+       window for motion blur are left as they are).
 
     Returns
     -------
