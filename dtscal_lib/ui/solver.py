@@ -113,7 +113,7 @@ def assess_quality(result):
 
 #: the calibration process runs this much nicer than the kernel: on a busy machine (two cores, a
 #: browser, the Jupyter server) the live image wins the CPU; on an idle one it changes nothing
-NICENESS = 10
+NICENESS = 5
 
 
 def _serve() -> None:
