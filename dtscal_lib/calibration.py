@@ -25,16 +25,22 @@ Pipeline, for ``V`` views of a planar target (any planar point set, any unit):
    solved through the Schur complement of the block-diagonal pose part, so one step
    costs ``O(V)`` instead of ``O(V^3)``. (OpenCV's ``calibrateCamera`` solves the full
    dense system at every step: ~0.5 s for 40 views of the 7x5 board, and it cannot
-   estimate skew.)
+   estimate skew.) A view whose error stays far above the others' gets its pose
+   re-estimated by PnP with the refined camera (a nearly face-on board has two poses that
+   project almost alike, and a poor start can leave one view in the flipped one), and the
+   refinement goes on from there when that fits it better. Given ``initial`` (an earlier
+   solution, e.g. of the same views before outliers were dropped), the refinement starts
+   there instead of steps 4-5's search.
 6. **Uncertainty**, the Hartley-Zisserman way: ``sigma^2 = |e|^2 / (2N - p)`` with
    ``e`` all residuals, ``N`` all points and ``p`` all estimated parameters;
    covariance ``sigma^2 (J^T J)^-1``; the reported standard deviations are the square
    roots of its intrinsic diagonal (the same formula as OpenCV's
    ``stdDeviationsIntrinsics``).
 
-The Jacobian of the projection comes from ``cv2.projectPoints`` (which ignores skew)
-plus the exact skew terms ``du = s * y_d``; residuals are computed with
-:func:`dtscal_lib.camera.project_points`, which honours skew.
+The projection of every point of every view and its Jacobian (skew and distortion terms
+included) are computed at once in numpy (``_Problem``), one vectorized Rodrigues for all poses;
+the tests check them against :func:`dtscal_lib.camera.project_points` (which honours skew),
+finite differences and ``cv2.Rodrigues``.
 
 Examples
 --------
