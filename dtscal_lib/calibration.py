@@ -25,16 +25,22 @@ Pipeline, for ``V`` views of a planar target (any planar point set, any unit):
    solved through the Schur complement of the block-diagonal pose part, so one step
    costs ``O(V)`` instead of ``O(V^3)``. (OpenCV's ``calibrateCamera`` solves the full
    dense system at every step: ~0.5 s for 40 views of the 7x5 board, and it cannot
-   estimate skew.)
+   estimate skew.) A view whose error stays far above the others' gets its pose
+   re-estimated by PnP with the refined camera (a nearly face-on board has two poses that
+   project almost alike, and a poor start can leave one view in the flipped one), and the
+   refinement goes on from there when that fits it better. Given ``initial`` (an earlier
+   solution, e.g. of the same views before outliers were dropped), the refinement starts
+   there instead of steps 4-5's search.
 6. **Uncertainty**, the Hartley-Zisserman way: ``sigma^2 = |e|^2 / (2N - p)`` with
    ``e`` all residuals, ``N`` all points and ``p`` all estimated parameters;
    covariance ``sigma^2 (J^T J)^-1``; the reported standard deviations are the square
    roots of its intrinsic diagonal (the same formula as OpenCV's
    ``stdDeviationsIntrinsics``).
 
-The Jacobian of the projection comes from ``cv2.projectPoints`` (which ignores skew)
-plus the exact skew terms ``du = s * y_d``; residuals are computed with
-:func:`dtscal_lib.camera.project_points`, which honours skew.
+The projection of every point of every view and its Jacobian (skew and distortion terms
+included) are computed at once in numpy (``_Problem``), one vectorized Rodrigues for all poses;
+the tests check them against :func:`dtscal_lib.camera.project_points` (which honours skew),
+finite differences and ``cv2.Rodrigues``.
 
 Examples
 --------
@@ -422,56 +428,172 @@ class _Problem:
 
     Intrinsic vector ``theta = [fx, fy, cx, cy, (s), dist...]``; poses ``(V, 6)``
     rows ``[rvec, t]``. Residual order: per view, per point, ``(du, dv)``.
+
+    The refinement works on all views at once (:meth:`residuals_stacked`,
+    :meth:`linearize_stacked`): the projection and its Jacobian are written out in numpy over
+    every point of every view (one ``cv2.Rodrigues`` per view for the rotation's derivative),
+    instead of one ``cv2.projectPoints`` call per view and step (~40x fewer Python-level calls
+    for 40 views). :meth:`residuals` (through :func:`~dtscal_lib.camera.project_points`) is the
+    independent reference the tests check it against; :meth:`linearize` gives the same numbers
+    split per view.
     """
 
     def __init__(self, obj, img, skew, dist_idx):
         self.obj3 = [np.column_stack([o, np.zeros(len(o))]) for o in obj]
         self.img = img
-        self.skew, self.dist_idx = skew, dist_idx
-        # Jacobian columns of cv2.projectPoints: rvec 0-2, tvec 3-5, fx 6, fy 7, cx 8, cy 9, dist 10-14
-        self.dist_cols = [10 + i for i in dist_idx]
+        self.skew, self.dist_idx = skew, list(dist_idx)
         self.n_intr = 4 + int(skew) + len(dist_idx)
+        counts = np.array([len(o) for o in obj])
+        self.counts = counts
+        self.starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+        self.view = np.repeat(np.arange(len(obj)), counts)
+        xy = np.concatenate([np.asarray(o, dtype=np.float64)[:, :2] for o in obj])
+        self.x, self.y = xy[:, 0].copy(), xy[:, 1].copy()
+        self.observed = np.concatenate([np.asarray(m, dtype=np.float64).reshape(-1, 2) for m in img])
 
     def residuals(self, theta, poses) -> list[np.ndarray]:
-        """Per view (N_i, 2) ``projected - observed`` pixels (skew honoured)."""
+        """Per view (N_i, 2) ``projected - observed`` pixels (skew honoured), view by view."""
         K, dist = _unpack(theta, self.skew, self.dist_idx)
         return [project_points(o, p[:3], p[3:], K, dist) - m for o, p, m in zip(self.obj3, poses, self.img)]
+
+    def _camera_points(self, poses, jacobian: bool):
+        """Board points in the camera frame, (P, 3), and (with ``jacobian``) d Xc / d rvec, (P, 3, 3)."""
+        poses = np.asarray(poses, dtype=np.float64)
+        R, dR = _rodrigues(poses[:, :3], jacobian)
+        R = R[self.view]  # (P, 3, 3)
+        t = poses[:, 3:][self.view]
+        Xc = R[:, :, 0] * self.x[:, None] + R[:, :, 1] * self.y[:, None] + t
+        if not jacobian:
+            return Xc, None
+        dR = dR[self.view]  # (P, k, i, j) = dR_ij / d r_k
+        dXc_dr = (dR[:, :, :, 0] * self.x[:, None, None] + dR[:, :, :, 1] * self.y[:, None, None]).transpose(0, 2, 1)
+        return Xc, dXc_dr
+
+    def residuals_stacked(self, theta, poses) -> np.ndarray:
+        """``projected - observed`` pixels of all views, (P, 2) (skew honoured)."""
+        return self._project(theta, poses, jacobian=False)[0]
+
+    def linearize_stacked(self, theta, poses):
+        """Residuals (P, 2), d residual / d intrinsics (P, 2, n_intr), d residual / d pose (P, 2, 6)."""
+        return self._project(theta, poses, jacobian=True)
+
+    def _project(self, theta, poses, jacobian: bool):
+        K, dist = _unpack(theta, self.skew, self.dist_idx)
+        fx, fy, cx, cy, s = K[0, 0], K[1, 1], K[0, 2], K[1, 2], K[0, 1]
+        k1, k2, p1, p2, k3 = dist
+        Xc, dXc_dr = self._camera_points(poses, jacobian)
+        iz = 1.0 / Xc[:, 2]
+        xp, yp = Xc[:, 0] * iz, Xc[:, 1] * iz
+        xx, yy, xy = xp * xp, yp * yp, xp * yp
+        r2 = xx + yy
+        rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = xp * rad + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xx)
+        yd = yp * rad + p1 * (r2 + 2.0 * yy) + 2.0 * p2 * xy
+        r = np.empty((len(xp), 2))
+        r[:, 0] = fx * xd + s * yd + cx - self.observed[:, 0]
+        r[:, 1] = fy * yd + cy - self.observed[:, 1]
+        if not jacobian:
+            return r, None, None
+        # distortion: d(xd, yd) / d(xp, yp)
+        drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3))  # d rad / d r2, times 2
+        dxd_dxp = rad + xx * drad + 2.0 * p1 * yp + 6.0 * p2 * xp
+        dxd_dyp = xy * drad + 2.0 * p1 * xp + 2.0 * p2 * yp
+        dyd_dxp = dxd_dyp
+        dyd_dyp = rad + yy * drad + 6.0 * p1 * yp + 2.0 * p2 * xp
+        # pixels: u = fx xd + s yd + cx, v = fy yd + cy; d(u, v) / d(xp, yp)
+        du_dxp, du_dyp = fx * dxd_dxp + s * dyd_dxp, fx * dxd_dyp + s * dyd_dyp
+        dv_dxp, dv_dyp = fy * dyd_dxp, fy * dyd_dyp
+        # d(xp, yp) / d Xc = [[iz, 0, -xp iz], [0, iz, -yp iz]]
+        dq = np.empty((len(xp), 2, 3))
+        dq[:, 0, 0], dq[:, 0, 1] = du_dxp * iz, du_dyp * iz
+        dq[:, 0, 2] = -(du_dxp * xp + du_dyp * yp) * iz
+        dq[:, 1, 0], dq[:, 1, 1] = dv_dxp * iz, dv_dyp * iz
+        dq[:, 1, 2] = -(dv_dxp * xp + dv_dyp * yp) * iz
+        Je = np.empty((len(xp), 2, 6))
+        Je[:, :, :3] = dq @ dXc_dr
+        Je[:, :, 3:] = dq  # d Xc / d t = I
+        Ji = np.zeros((len(xp), 2, self.n_intr))
+        Ji[:, 0, 0] = xd
+        Ji[:, 1, 1] = yd
+        Ji[:, 0, 2] = 1.0
+        Ji[:, 1, 3] = 1.0
+        col = 4
+        if self.skew:
+            Ji[:, 0, 4] = yd
+            col = 5
+        terms = {0: (xp * r2, yp * r2), 1: (xp * r2 * r2, yp * r2 * r2), 2: (2.0 * xy, r2 + 2.0 * yy),
+                 3: (r2 + 2.0 * xx, 2.0 * xy), 4: (xp * r2 ** 3, yp * r2 ** 3)}
+        for c, i in enumerate(self.dist_idx, start=col):
+            dxd, dyd = terms[i]
+            Ji[:, 0, c] = fx * dxd + s * dyd
+            Ji[:, 1, c] = fy * dyd
+        return r, Ji, Je
 
     def linearize(self, theta, poses):
         """Residual vectors and Jacobian blocks per view.
 
         Returns lists of ``r`` (2N_i,), ``Ji`` (2N_i, n_intr), ``Je`` (2N_i, 6).
         """
-        K, dist = _unpack(theta, self.skew, self.dist_idx)
-        s = K[0, 1]
-        K0 = K.copy()
-        K0[0, 1] = 0.0
-        rs, Jis, Jes = [], [], []
-        for o, p, m in zip(self.obj3, poses, self.img):
-            uv0, J = cv2.projectPoints(o, p[:3], p[3:], K0, dist)
-            uv0 = uv0.reshape(-1, 2)
-            yd = (uv0[:, 1] - K[1, 2]) / K[1, 1]  # distorted normalized y
-            u = uv0[:, 0] + s * yd
-            r = np.column_stack([u, uv0[:, 1]]) - m
-            # u = u0 + s * y_d with y_d = (v - cy) / fy: chain rule for everything y_d depends on
-            Jv = J[1::2]
-            Je = J[:, :6].copy()
-            Ji = np.zeros((len(J), self.n_intr))
-            Ji[:, :4] = J[:, 6:10]
-            nd = len(self.dist_idx)
-            if nd:
-                Ji[:, 4 + int(self.skew):] = J[:, self.dist_cols]
-            if s != 0.0:
-                Je[0::2] += (s / K[1, 1]) * Jv[:, :6]
-                if nd:
-                    Ji[0::2, 4 + int(self.skew):] += (s / K[1, 1]) * Jv[:, self.dist_cols]
-                # fx, cx, cy do not change y_d; fy does not either (v - cy = fy * y_d)
-            if self.skew:
-                Ji[0::2, 4] = yd
-            rs.append(r.ravel())
-            Jis.append(Ji)
-            Jes.append(Je)
-        return rs, Jis, Jes
+        r, Ji, Je = self.linearize_stacked(theta, poses)
+        cuts = self.starts[1:]
+        return ([a.ravel() for a in np.split(r, cuts)], [a.reshape(-1, self.n_intr) for a in np.split(Ji, cuts)],
+                [a.reshape(-1, 6) for a in np.split(Je, cuts)])
+
+    def normal_blocks(self, r, Ji, Je):
+        """:func:`_normal_blocks` of the stacked arrays of :meth:`linearize_stacked`."""
+        n = self.n_intr
+        Ji2, r2 = Ji.reshape(-1, n), r.ravel()
+        A = Ji2.T @ Ji2
+        gi = Ji2.T @ r2
+        if np.all(self.counts == self.counts[0]):  # the usual case (every view sees the whole board)
+            V = len(self.counts)
+            Jiv, Jev, rv = Ji.reshape(V, -1, n), Je.reshape(V, -1, 6), r.reshape(V, -1, 1)
+            JevT = Jev.transpose(0, 2, 1)
+            return A, Jiv.transpose(0, 2, 1) @ Jev, JevT @ Jev, gi, (JevT @ rv)[:, :, 0]
+        Bs = np.add.reduceat(np.einsum("pai,paj->pij", Ji, Je), self.starts, axis=0)
+        Cs = np.add.reduceat(np.einsum("pai,paj->pij", Je, Je), self.starts, axis=0)
+        gv = np.add.reduceat(np.einsum("pai,pa->pi", Je, r), self.starts, axis=0)
+        return A, Bs, Cs, gi, gv
+
+
+def _skew_matrices(v: np.ndarray) -> np.ndarray:
+    """``[v]_x`` for each row of ``v`` (M, 3): (M, 3, 3)."""
+    S = np.zeros((len(v), 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return S
+
+
+def _rodrigues(rvecs: np.ndarray, jacobian: bool = True):
+    """Rotation matrices of Rodrigues vectors (V, 3) -> (V, 3, 3), and ``dR[v, k] = dR / d r_k`` (V, 3, 3, 3).
+
+    Vectorized ``cv2.Rodrigues`` (the same matrices and derivatives, checked in the tests); the
+    derivative is Gallego and Yezzi's ``dR/dr_k = (r_k [r]_x + [r x (I - R) e_k]_x) R / |r|^2``, and
+    its first-order limit ``[e_k]_x`` near the identity.
+    """
+    r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
+    th = np.linalg.norm(r, axis=1)
+    small = th < 1e-9
+    ths = np.where(small, 1.0, th)
+    k = r / ths[:, None]
+    c, s = np.cos(th), np.sin(th)
+    Kx = _skew_matrices(k)
+    R = (c[:, None, None] * np.eye(3) + (1.0 - c)[:, None, None] * k[:, :, None] * k[:, None, :]
+         + s[:, None, None] * Kx)
+    if small.any():
+        R[small] = np.eye(3) + _skew_matrices(r[small])
+    if not jacobian:
+        return R, None
+    E = np.eye(3)
+    rx = _skew_matrices(r)
+    ImR = np.eye(3) - R  # (V, 3, 3); column k is (I - R) e_k
+    dR = np.empty((len(r), 3, 3, 3))
+    for j in range(3):
+        w = np.cross(r, ImR[:, :, j])
+        dR[:, j] = (r[:, j, None, None] * rx + _skew_matrices(w)) @ R / (ths ** 2)[:, None, None]
+    if small.any():
+        dR[small] = _skew_matrices(E)[None]
+    return R, dR
 
 
 def _normal_blocks(rs, Jis, Jes):
@@ -498,14 +620,21 @@ def _schur_solve(A, Bs, Cs, gi, gv, lam):
     return di, dv
 
 
+def _cost(r: np.ndarray) -> float:
+    return float(np.einsum("ij,ij->", r, r))
+
+
 def _refine(problem: _Problem, theta, poses, max_iter: int = 200):
-    """Levenberg-Marquardt with Marquardt's diagonal scaling; returns ``theta, poses, iterations``."""
-    rs, Jis, Jes = problem.linearize(theta, poses)
-    cost = sum(float(r @ r) for r in rs)
+    """Levenberg-Marquardt with Marquardt's diagonal scaling; returns ``theta, poses, iterations``.
+
+    A trial step costs only the residuals; the Jacobian is computed once a step is accepted.
+    """
+    r, Ji, Je = problem.linearize_stacked(theta, poses)
+    cost = _cost(r)
     lam = 1e-3
     it = 0
     for it in range(1, max_iter + 1):
-        A, Bs, Cs, gi, gv = _normal_blocks(rs, Jis, Jes)
+        A, Bs, Cs, gi, gv = problem.normal_blocks(r, Ji, Je)
         improved = False
         while lam < 1e16:
             try:
@@ -518,11 +647,11 @@ def _refine(problem: _Problem, theta, poses, max_iter: int = 200):
                 lam *= 10.0
                 continue
             try:
-                rs_new, Jis_new, Jes_new = problem.linearize(t_new, p_new)
+                with np.errstate(all="ignore"):
+                    cost_new = _cost(problem.residuals_stacked(t_new, p_new))
             except cv2.error:
                 lam *= 10.0
                 continue
-            cost_new = sum(float(r @ r) for r in rs_new)
             if np.isfinite(cost_new) and cost_new <= cost:
                 improved = True
                 break
@@ -533,28 +662,29 @@ def _refine(problem: _Problem, theta, poses, max_iter: int = 200):
             np.abs(dv) <= 1e-12 * (np.abs(poses) + 1e-6)
         )
         stalled = cost - cost_new <= 1e-16 * cost
-        theta, poses, rs, Jis, Jes, cost = t_new, p_new, rs_new, Jis_new, Jes_new, cost_new
+        theta, poses, cost = t_new, p_new, cost_new
         lam = max(lam / 10.0, 1e-12)
         if small_step or stalled or cost == 0.0:
             break
+        r, Ji, Je = problem.linearize_stacked(theta, poses)
     return theta, poses, it
 
 
 def _intrinsic_covariance(problem: _Problem, theta, poses):
     """``sigma^2`` and ``sigma^2 (J^T J)^-1`` restricted to the intrinsics (Schur complement)."""
-    rs, Jis, Jes = problem.linearize(theta, poses)
-    A, Bs, Cs, _, _ = _normal_blocks(rs, Jis, Jes)
-    n_res = sum(len(r) for r in rs)
-    n_par = problem.n_intr + 6 * len(rs)
+    r, Ji, Je = problem.linearize_stacked(theta, poses)
+    A, Bs, Cs, _, _ = problem.normal_blocks(r, Ji, Je)
+    n_res = r.size
+    n_par = problem.n_intr + 6 * len(problem.counts)
     dof = n_res - n_par  # > 0: checked on entry to calibrate()
-    sigma2 = sum(float(r @ r) for r in rs) / dof
+    sigma2 = _cost(r) / dof
     S = A - np.einsum("vij,vjk,vlk->il", Bs, np.linalg.inv(Cs), Bs)
     return sigma2, sigma2 * np.linalg.inv(S)
 
 
 # =========================================================================== entry point
 def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bob", skew: bool = False,
-              fix_k3: bool = True) -> CalibrationResult:
+              fix_k3: bool = True, initial=None) -> CalibrationResult:
     """Calibrate a camera's intrinsics from views of a planar target.
 
     Parameters
@@ -567,6 +697,10 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
     model : ``"plumb_bob"`` (k1, k2, p1, p2 [, k3]) or ``"radial2"`` (k1, k2: Zhang's model)
     skew : also estimate the skew ``s = K[0, 1]`` (OpenCV cannot; ROS does not)
     fix_k3 : keep k3 = 0 as ROS does (``plumb_bob`` only)
+    initial : optional ``(K, dist, rvecs, tvecs)`` to start the refinement from, one pose per
+        view given (e.g. an earlier solution of the same views minus a few outliers, as
+        :func:`dtscal_lib.pipeline.calibrate_without_outlier_views` does). It replaces the
+        closed-form and multi-start search; the checks and the result are as without it.
 
     Returns
     -------
@@ -596,7 +730,11 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
     _check_not_degenerate(_constraint_matrix(Hs, size, skew), len(Hs), skew)
 
     problem = _Problem(obj, img, skew, dist_idx)
-    theta, poses, iters = _refine_from_best_start(problem, Hs, obj, img, size, skew, dist_idx)
+    if initial is None:
+        theta, poses, iters = _refine_from_best_start(problem, Hs, obj, img, size, skew, dist_idx)
+    else:
+        theta, poses, iters = _refine(problem, *_initial_parameters(initial, len(obj), skew, dist_idx))
+    theta, poses, iters = _reseed_trapped_poses(problem, theta, poses, iters)
 
     K, dist = _unpack(theta, skew, dist_idx)
     try:
@@ -608,15 +746,15 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
         ) from None
     _check_tilt_spread(poses[:, :3])
     try:
-        res = problem.residuals(theta, poses)
+        res = problem.residuals_stacked(theta, poses)
         sigma2, cov = _intrinsic_covariance(problem, theta, poses)
     except (np.linalg.LinAlgError, DtscalError) as exc:
         raise CalibrationError(
             f"the calibration did not converge to a usable camera ({exc}); add views with the board "
             "tilted in different directions and covering the image"
         ) from None
-    sq = np.array([float((r**2).sum()) for r in res])
-    npts = np.array([len(r) for r in res])
+    sq = np.add.reduceat((res ** 2).sum(axis=1), problem.starts)
+    npts = problem.counts
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) < 0):
         raise CalibrationError("the parameter covariance is singular: the views do not determine the camera; add views")
     names = _param_names(skew, dist_idx)
@@ -646,6 +784,68 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
         object_points=obj,
         image_points=img,
     )
+
+
+#: a view whose RMS exceeds this many times the median view's gets its pose re-estimated (PnP)
+_TRAPPED_VIEW_FACTOR = 3.0
+
+
+def _reseed_trapped_poses(problem: "_Problem", theta, poses, iters: int, rounds: int = 2):
+    """Re-estimate the pose of views that fit far worse than the rest, and refine again if that helps.
+
+    A planar board seen nearly face-on has two poses that project almost alike (the tilt flipped);
+    started from a poor camera, one view's pose can end up in the wrong one and stay there: on the
+    recorded session with ``radial2`` and skew, one view kept 2.9 px RMS (the others 0.1 px) while
+    ``cv2.solvePnP`` with the refined camera fits it to 0.07 px. For each view above
+    :data:`_TRAPPED_VIEW_FACTOR` x the median view's RMS, PnP with the current camera proposes a pose;
+    when it fits that view better than half as badly, the refinement continues from there. A view
+    that is bad in itself (a blurred detection) keeps its pose: PnP cannot fit it better.
+    """
+    K, dist = _unpack(theta, problem.skew, problem.dist_idx)
+    for _ in range(rounds):
+        r = problem.residuals_stacked(theta, poses)
+        pv = np.sqrt(np.add.reduceat((r ** 2).sum(axis=1), problem.starts) / problem.counts)
+        suspects = np.flatnonzero(pv > _TRAPPED_VIEW_FACTOR * np.median(pv))
+        if not len(suspects):
+            break
+        new = poses.copy()
+        for v in suspects:
+            o3, m = problem.obj3[v], np.asarray(problem.img[v], dtype=np.float64).reshape(-1, 2)
+            try:
+                ok, rv, tv = cv2.solvePnP(o3, m.reshape(-1, 1, 2), K, dist)
+            except cv2.error:
+                continue
+            if not ok:
+                continue
+            e = np.sqrt(((project_points(o3, rv.ravel(), tv.ravel(), K, dist) - m) ** 2).sum(axis=1).mean())
+            if np.isfinite(e) and e < 0.5 * pv[v]:
+                new[v] = np.concatenate([rv.ravel(), tv.ravel()])
+        if np.array_equal(new, poses):
+            break
+        t2, p2, more = _refine(problem, theta, new)
+        if _cost(problem.residuals_stacked(t2, p2)) >= _cost(problem.residuals_stacked(theta, poses)):
+            break
+        theta, poses, iters = t2, p2, iters + more
+        K, dist = _unpack(theta, problem.skew, problem.dist_idx)
+    return theta, poses, iters
+
+
+def _initial_parameters(initial, n_views: int, skew: bool, dist_idx) -> tuple[np.ndarray, np.ndarray]:
+    """``theta, poses`` from a given start ``(K, dist, rvecs, tvecs)`` (see :func:`calibrate`)."""
+    try:
+        K, dist, rvecs, tvecs = initial
+        K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+        dist = np.zeros(5) if dist is None else np.resize(np.asarray(dist, dtype=np.float64).ravel(), 5)
+        poses = np.hstack([np.asarray(rvecs, dtype=np.float64).reshape(-1, 3),
+                           np.asarray(tvecs, dtype=np.float64).reshape(-1, 3)])
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"initial must be (K, dist, rvecs, tvecs), one pose per view ({exc})") from None
+    if len(poses) != n_views or not (np.all(np.isfinite(K)) and np.all(np.isfinite(dist))
+                                     and np.all(np.isfinite(poses))) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise CalibrationError(f"initial must be a finite camera with positive focal lengths and {n_views} poses")
+    theta = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], [K[0, 1]] if skew else [],
+                            dist[list(dist_idx)]])
+    return theta, poses
 
 
 #: iterations each starting point gets before the better one is refined to convergence
@@ -691,7 +891,7 @@ def _refine_from_best_start(problem: "_Problem", Hs, obj, img, size, skew: bool,
             return _refine(problem, theta0, poses0)
         try:
             theta, poses, it = _refine(problem, theta0, poses0, max_iter=_START_TRIAL_ITERATIONS)
-            cost = sum(float((r ** 2).sum()) for r in problem.residuals(theta, poses))
+            cost = _cost(problem.residuals_stacked(theta, poses))
         except cv2.error:
             continue
         if np.isfinite(cost):

@@ -48,6 +48,10 @@ def calibrate_without_outlier_views(object_points, image_points, image_size, **k
     median per-view RMS are dropped (at most ``MAX_OUTLIER_SHARE`` of them, worst first)
     and the calibration is repeated, until no view stands out.
 
+    The repeated calibration starts from the previous solution (its camera and the kept views'
+    poses: ``calibrate(..., initial=...)``), which is next to the new optimum, instead of searching
+    from the closed form again; should that refinement fail, the views are calibrated from scratch.
+
     Returns
     -------
     (CalibrationResult, list of dropped view indices into the inputs)
@@ -65,7 +69,13 @@ def calibrate_without_outlier_views(object_points, image_points, image_size, **k
             return result, sorted(dropped)
         dropped += [keep[k] for k in worst]
         keep = [i for k, i in enumerate(keep) if k not in set(worst)]
-        result = calibrate([object_points[i] for i in keep], [image_points[i] for i in keep], image_size, **kw)
+        kept = [k for k in range(len(pv)) if k not in set(worst)]
+        start = (result.K, result.dist, result.rvecs[kept], result.tvecs[kept])
+        views = ([object_points[i] for i in keep], [image_points[i] for i in keep], image_size)
+        try:
+            result = calibrate(*views, initial=start, **kw)
+        except CalibrationError:  # the warm start went astray: search from the closed form as the first fit did
+            result = calibrate(*views, **kw)
 
 
 @dataclass

@@ -419,3 +419,76 @@ def test_hopelessly_noisy_views_rejected():
     _, _, img = synth_views(dt.default_K(), dt.default_dist(), 3, seed=73, tilt=5.0, base_tilt=(10, 0), noise=1.0)
     with pytest.raises(CalibrationError, match=r"(parallel|do not determine the focal length)"):
         calibrate([OBJ] * 3, img, SIZE)
+
+
+# --------------------------------------------------------------------------- speed-ups: same numbers
+def test_vectorized_rodrigues_matches_opencv():
+    from dtscal_lib.calibration import _rodrigues
+
+    rng = np.random.default_rng(0)
+    rv = rng.normal(size=(40, 3))
+    rv[0], rv[1], rv[2] = 0.0, [1e-12, 0.0, 0.0], [np.pi, 0.0, 0.0]
+    R, dR = _rodrigues(rv)
+    for i, r in enumerate(rv):
+        Rc, J = cv2.Rodrigues(r)
+        np.testing.assert_allclose(R[i], Rc, atol=1e-12)
+        np.testing.assert_allclose(dR[i], J.reshape(3, 3, 3), atol=1e-9)  # dR[k] = dR / d r_k
+
+
+def test_stacked_normal_equations_equal_the_per_view_ones():
+    """All views at once (the refinement's path) gives the blocks of the per-view sums, also when the
+    views have different numbers of points."""
+    from dtscal_lib.calibration import _normal_blocks
+
+    rvecs, tvecs, img = synth_views(K_with(s=1.0), dt.default_dist(), 5, seed=2, noise=0.3)
+    obj = [OBJ[:, :2]] * 5
+    obj[2], img[2] = OBJ[:20, :2], img[2][:20]
+    prob = _Problem(obj, img, True, [0, 1, 2, 3])
+    theta = np.array([309.0, 317.0, 327.0, 240.0, 1.0, -0.25, 0.06, 0.001, -0.002])
+    poses = np.hstack([rvecs, tvecs]) + 0.01
+    r, Ji, Je = prob.linearize_stacked(theta, poses)
+    np.testing.assert_allclose(r, np.concatenate(prob.residuals(theta, poses)), atol=1e-9)
+    for a, b in zip(prob.normal_blocks(r, Ji, Je), _normal_blocks(*prob.linearize(theta, poses))):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
+
+
+def test_outlier_refit_from_the_first_solution_equals_a_fit_from_scratch():
+    """calibrate_without_outlier_views refits the kept views starting from the first fit (initial=...);
+    the result is the from-scratch calibration of those views."""
+    from dtscal_lib.pipeline import calibrate_without_outlier_views
+
+    _, _, img = synth_views(dt.default_K(), dt.default_dist(), 16, seed=21, noise=0.2)
+    img[5] = img[5] + np.random.default_rng(1).normal(0.0, 2.0, img[5].shape)  # a badly detected view
+    res, dropped = calibrate_without_outlier_views([OBJ] * 16, img, SIZE)
+    assert dropped == [5]
+    keep = [i for i in range(16) if i not in dropped]
+    ref = calibrate([OBJ] * len(keep), [img[i] for i in keep], SIZE)
+    np.testing.assert_allclose(res.K, ref.K, rtol=1e-8)
+    np.testing.assert_allclose(res.dist, ref.dist, atol=1e-9)
+    np.testing.assert_allclose(res.per_view_rms, ref.per_view_rms, rtol=1e-6)
+    np.testing.assert_allclose([res.std[k] for k in ref.std], list(ref.std.values()), rtol=1e-6)
+    assert res.rms == pytest.approx(ref.rms, rel=1e-9) and res.n_views == 15
+
+
+def test_a_view_pose_trapped_in_the_flipped_tilt_is_reseeded():
+    """A planar view has two poses that project almost alike; started in the wrong one (here on
+    purpose, through initial=...), the refinement used to stay there with that view at ~4 px. PnP with
+    the refined camera re-seeds it and the fit is the one from the right start."""
+    K, dist = dt.default_K(), dt.default_dist()
+    rvecs, tvecs, img = synth_views(K, dist, 12, seed=3, noise=0.2)
+    _, rs, ts, _ = cv2.solvePnPGeneric(OBJ, img[4].reshape(-1, 1, 2), K, dist, flags=cv2.SOLVEPNP_IPPE)
+    flipped = [i for i, r in enumerate(rs) if np.abs(r.ravel() - rvecs[4]).max() > 0.05]
+    assert flipped, "IPPE gives the second, flipped pose"
+    r0, t0 = rvecs.copy(), tvecs.copy()
+    r0[4], t0[4] = rs[flipped[0]].ravel(), ts[flipped[0]].ravel()
+    good = calibrate([OBJ] * 12, img, SIZE)
+    res = calibrate([OBJ] * 12, img, SIZE, initial=(K, dist, r0, t0))
+    assert res.per_view_rms.max() < 0.5
+    np.testing.assert_allclose(res.K, good.K, rtol=1e-8)
+    assert res.rms == pytest.approx(good.rms, rel=1e-9)
+
+
+def test_initial_must_fit_the_views():
+    _, _, img = synth_views(dt.default_K(), dt.default_dist(), 4, seed=1)
+    with pytest.raises(CalibrationError, match="poses"):
+        calibrate([OBJ] * 4, img, SIZE, initial=(dt.default_K(), dt.default_dist(), np.zeros((3, 3)), np.ones((3, 3))))

@@ -77,6 +77,28 @@ def test_calibrate_button_then_commit_to_a_folder(filled, truth, tmp_path):
     filled.alpha.value = 1.0
     filled.loop.step(f)
     assert filled.preview.value[:2] == b"\xff\xd8"
+    # the maps were made with the result (not in the frame loop); another alpha's are made in a helper
+    # thread while the frames go on, and then they are the kit's own maps for that alpha
+    assert wait_for(lambda: filled._preview_key == (id(filled.result), 1.0), 30)
+    cam1 = filled.result.camera().with_alpha(1.0)
+    for a, b in zip(filled._preview_maps, cam1.rectification_maps()):
+        np.testing.assert_allclose(a, b, atol=1e-3)
+
+
+def test_fast_preview_maps_are_the_kits_maps():
+    from dtscal_lib import duckietown as dt
+    from dtscal_lib.camera import CameraModel
+    from dtscal_lib.ui.intrinsic import rectification_maps_fast
+
+    for alpha in (0.0, 1.0):
+        cam = CameraModel(dt.default_K(), dt.default_dist(), dt.IMAGE_SIZE).with_alpha(alpha)
+        for a, b in zip(rectification_maps_fast(cam), cam.rectification_maps()):
+            np.testing.assert_allclose(a, b, atol=1e-3)
+    K = dt.default_K()
+    K[0, 1] = 2.0  # OpenCV ignores skew: the kit's maps are used
+    skewed = CameraModel(K, dt.default_dist(), dt.IMAGE_SIZE)
+    for a, b in zip(rectification_maps_fast(skewed), skewed.rectification_maps()):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_drop_a_sample_by_its_button(filled):

@@ -108,3 +108,17 @@ def test_runs_live_on_the_recording(camera):
         assert "live:" in tool.status.value
     finally:
         tool.close()
+
+
+def test_rectification_maps_made_once_by_opencv_give_the_same_fit(camera):
+    """The tool rectifies with OpenCV's maps made once per calibration (the kit's numpy maps took
+    ~0.1 s per frame); they are the kit's maps, and the fit on a frame is the same."""
+    from dtscal_lib.ui.extrinsic import _MapsCamera
+
+    fast = _MapsCamera(camera.K, camera.dist, camera.size, camera.model, camera.P)
+    for a, b in zip(fast.rectification_maps(), camera.rectification_maps()):
+        np.testing.assert_allclose(a, b, atol=1e-3)
+    assert fast.rectification_maps() is fast.rectification_maps()  # made once
+    frame = next(f for f in open_source(BAG) if f.ok)
+    np.testing.assert_allclose(ground.extrinsics_from_image(frame.image, fast).H,
+                               ground.extrinsics_from_image(frame.image, camera).H, rtol=1e-6, atol=1e-9)

@@ -37,7 +37,22 @@ from ..ground import birdseye_view, draw_ground_grid, extrinsics_from_image, pix
 from . import render
 from ..sources.live import open_live
 from .frameloop import FrameLoop
-from .intrinsic import robot_of
+from .intrinsic import rectification_maps_fast, robot_of
+
+
+class _MapsCamera(CameraModel):
+    """A camera whose rectification maps are made once, by OpenCV (see
+    :func:`~dtscal_lib.ui.intrinsic.rectification_maps_fast`): :func:`extrinsics_from_image` asks
+    for them on every frame, and the kit's numpy maps cost ~0.1 s of CPU each time."""
+
+    def rectification_maps(self, new_K=None, size=None):
+        if new_K is not None or size is not None:
+            return super().rectification_maps(new_K, size)
+        maps = self.__dict__.get("_maps")
+        if maps is None:
+            maps = rectification_maps_fast(self)
+            object.__setattr__(self, "_maps", maps)
+        return maps
 
 
 class LiveExtrinsics:
@@ -127,15 +142,18 @@ class LiveExtrinsics:
             return src
         return src.camera()
 
-    def _rectify(self, img, cam: CameraModel):
+    def _rectify(self, img, cam: CameraModel) -> tuple[np.ndarray, CameraModel]:
+        """The rectified frame, and the camera with its maps made once (used for the fit too)."""
         old = self._maps_for
-        same = old is not None and np.array_equal(old.K, cam.K) and np.array_equal(old.dist, cam.dist)
-        if old is not cam and not same:
-            self._maps = cam.rectification_maps()
+        same = (old is not None and np.array_equal(old.K, cam.K) and np.array_equal(old.dist, cam.dist)
+                and np.array_equal(old.P, cam.P) and old.size == cam.size)
+        if not same:
+            fast = _MapsCamera(cam.K, cam.dist, cam.size, cam.model, cam.P)
+            self._maps = fast.rectification_maps()
             if old is not None:  # a new intrinsic calibration: fits made with the old one no longer count
                 self.reset_best()
-        self._maps_for = cam
-        return rectify_image(img, self._maps)
+            self._maps_for = fast
+        return rectify_image(img, self._maps), self._maps_for
 
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
@@ -160,7 +178,7 @@ class LiveExtrinsics:
         if (img.shape[1], img.shape[0]) != cam.size:
             self.bad["size_mismatch"] += 1
             return False
-        rect = self._rectify(img, cam)
+        rect, cam = self._rectify(img, cam)
         try:
             res = extrinsics_from_image(img, cam, self.board)
         except DtscalError as exc:

@@ -111,7 +111,16 @@ def assess_quality(result):
         return f"no verdict ({type(exc).__name__}: {exc})"
 
 
+#: the calibration process runs this much nicer than the kernel: on a busy machine (two cores, a
+#: browser, the Jupyter server) the live image wins the CPU; on an idle one it changes nothing
+NICENESS = 5
+
+
 def _serve() -> None:
+    try:
+        os.nice(NICENESS)
+    except (AttributeError, OSError):  # no nice() on this platform: the same, at normal priority
+        pass
     from ..pipeline import calibrate_without_outlier_views
 
     out, inp = sys.stdout.buffer, sys.stdin.buffer
