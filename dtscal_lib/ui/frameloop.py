@@ -4,6 +4,12 @@ One background thread asks the source for its newest frame (never a queue: a slo
 skips frames, it does not fall behind), hands it to the tool's ``on_frame`` and reports
 changes of the source's state to ``on_status``. An exception in a tool's step is counted
 and shown as one line; it never ends the loop and never prints a traceback.
+
+:class:`DisplayPacer` keeps the browser from falling behind: at most one live image is on
+its way to the page; while it is, the newest processed frame waits (older ones are dropped)
+and goes out as soon as the page says it has displayed the previous one. Without that, a
+kernel that processes frames faster than a busy browser displays them fills the websocket
+with images, and the latency a student sees grows without bound.
 """
 
 from __future__ import annotations
@@ -11,7 +17,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter, deque
-from typing import Callable
+from typing import Any, Callable
 
 
 class FrameLoop:
@@ -113,7 +119,145 @@ class FrameLoop:
             self._last_index = frame.index
             self.step(frame)
 
+    def idle(self, seconds: float) -> None:
+        """Rest the loop thread (a tool with nothing to do for a while); ``stop`` ends the rest."""
+        if threading.current_thread() is self._thread:
+            self._stop.wait(seconds)
+
     def longest_gap(self, since: float) -> float:
         """Longest time (s) between two displayed frames after ``since`` (perf_counter)."""
         t = [x for x in list(self.display_times) if x >= since]
         return max((b - a for a, b in zip(t, t[1:])), default=0.0)
+
+
+class DisplayPacer:
+    """Send live images to the browser no faster than it displays them, always the newest.
+
+    ``show(payload)`` puts one image (and whatever goes with it) into the widgets. The loop
+    calls :meth:`offer` with every processed frame; the front end calls :meth:`ack` with the
+    token of each image it has displayed (see :func:`ack_widgets`). At most ``window`` images
+    are on their way to the page; while that many are, an offered frame becomes the one pending
+    frame (replacing, i.e. dropping, an older one) and is shown by :meth:`ack`. Until the first
+    acknowledgement arrives (no browser: a benchmark, a test; a front end that does not run the
+    hook) every frame is shown at once, as without pacing; an acknowledgement lost for
+    ``timeout`` seconds does not stall the view.
+
+    Parameters
+    ----------
+    show : called with a payload, in the loop thread or in the thread that calls ``ack``
+    window : images in flight at most (1: strictly one after the other)
+    timeout : seconds after which an unacknowledged image no longer holds the next one back
+    """
+
+    WINDOW = 2
+    TIMEOUT = 0.5
+
+    def __init__(self, show: Callable[[Any], None], *, window: int | None = None, timeout: float | None = None):
+        self._show = show
+        self.window = max(1, int(self.WINDOW if window is None else window))
+        self.timeout = float(self.TIMEOUT if timeout is None else timeout)
+        self._lock = threading.Lock()
+        self._show_lock = threading.Lock()  # one widget update at a time, in whichever thread
+        self._seq = 0
+        self._in_flight: deque[tuple[int, float]] = deque()  # (token, time sent), oldest first
+        self._pending: tuple[int, Any] | None = None
+        self._last_shown = 0
+        self.acks = 0  # acknowledgements received (any token): the front end runs the hook
+        self.shown = 0
+        self.dropped = 0  # frames replaced while waiting for the browser (never shown)
+        self.round_trips: deque[float] = deque(maxlen=512)  # s, from show to its acknowledgement
+
+    @property
+    def pacing(self) -> bool:
+        """True once the front end acknowledges images (then at most ``window`` are in flight)."""
+        return self.acks > 0
+
+    def next_token(self) -> int:
+        """A new token for an image (its ``dtscal-shown-<token>`` class, echoed by the page)."""
+        with self._lock:
+            self._seq += 1
+            return self._seq
+
+    def _ready(self, now: float) -> bool:
+        fl = self._in_flight
+        while fl and now - fl[0][1] >= self.timeout:  # lost acknowledgements do not hold the view
+            fl.popleft()
+        return not self.acks or len(fl) < self.window
+
+    def offer(self, token: int, payload) -> bool:
+        """Show ``payload`` now if the page is ready for it (returns True), else keep it pending."""
+        with self._lock:
+            now = time.monotonic()
+            if self._pending is not None:  # the older pending frame is dropped: only the newest waits
+                self.dropped += 1
+                self._pending = None
+            if not self._ready(now):
+                self._pending = (token, payload)
+                return False
+            self._in_flight.append((token, now))
+        self._do_show(token, payload)
+        return True
+
+    def ack(self, token) -> None:
+        """The page displayed the image ``token``: show the pending frame, if any."""
+        try:
+            token = int(token)
+        except (TypeError, ValueError):
+            return
+        with self._lock:
+            self.acks += 1
+            fl = self._in_flight
+            if not any(t == token for t, _ in fl):  # a late acknowledgement (timed out already)
+                return
+            now = time.monotonic()
+            while fl:  # images sent before this one and not displayed were replaced in the page
+                t, sent = fl.popleft()
+                if t == token:
+                    self.round_trips.append(now - sent)
+                    break
+            nxt = None
+            if self._pending is not None and self._ready(now):
+                nxt, self._pending = self._pending, None
+                fl.append((nxt[0], now))
+        if nxt is not None:
+            self._do_show(*nxt)
+
+    def _do_show(self, token: int, payload) -> None:
+        with self._show_lock:
+            if token < self._last_shown:  # a newer frame got out first (the other thread): never go back
+                self.dropped += 1
+                return
+            self._last_shown = token
+            self._show(payload)
+            self.shown += 1
+
+
+#: installed once per page by :func:`ack_widgets`: when a live image has loaded, write its token
+#: into the hidden text box of its tool, which sends it to the kernel (ipywidgets' own sync)
+_ACK_HOOK_JS = (
+    "if(!window.__dtscalAck){window.__dtscalAck=1;document.addEventListener('load',function(e){"
+    "var i=e.target;if(!i||!i.classList||!i.classList.contains('dtscal-live'))return;"
+    "var c=[].find.call(i.classList,function(k){return k.indexOf('dtscal-shown-')===0;});"
+    "var r=i.closest('.dtscal-tool');var a=r&&r.querySelector('.dtscal-ack input');"
+    "if(c&&a){a.value=c.slice(13);a.dispatchEvent(new Event('input',{bubbles:true}));}},true);}"
+)
+
+
+def ack_widgets(pacer: DisplayPacer):
+    """Hidden widgets that carry the page's acknowledgements to ``pacer`` (put them in the tool's
+    box, whose ``_dom_classes`` must include ``dtscal-tool``).
+
+    A text box the page writes the token of each displayed image into (ipywidgets syncs it to the
+    kernel), and an HTML snippet whose ``onerror`` installs the page's load listener once (plain
+    ipywidgets: no front-end extension to install).
+    """
+    import html
+
+    import ipywidgets as w
+
+    box = w.Text(value="", continuous_update=True, layout=w.Layout(display="none"))
+    box.add_class("dtscal-ack")
+    box.observe(lambda ch: pacer.ack(ch["new"]), "value")
+    hook = w.HTML(f'<img alt="" src="data:," style="display:none" onerror="{html.escape(_ACK_HOOK_JS)}">',
+                  layout=w.Layout(display="none"))
+    return w.HBox([box, hook], layout=w.Layout(display="none"))
