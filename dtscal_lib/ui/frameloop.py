@@ -135,26 +135,36 @@ class DisplayPacer:
 
     ``show(payload)`` puts one image (and whatever goes with it) into the widgets. The loop
     calls :meth:`offer` with every processed frame; the front end calls :meth:`ack` with the
-    token of each image it has displayed (see :func:`ack_widgets`). At most ``window`` images
-    are on their way to the page; while that many are, an offered frame becomes the one pending
-    frame (replacing, i.e. dropping, an older one) and is shown by :meth:`ack`. Until the first
-    acknowledgement arrives (no browser: a benchmark, a test; a front end that does not run the
-    hook) every frame is shown at once, as without pacing; an acknowledgement lost for
-    ``timeout`` seconds does not stall the view.
+    token of each image it has displayed (see :func:`ack_widgets`); an image replaced in the
+    page before it loaded is never acknowledged, the next acknowledgement clears it.
+
+    An offered frame is shown at once unless the page is behind: ``window`` images are in
+    flight, or the oldest image in flight was sent longer ago than the lag limit (three times
+    the shortest recent round trip, at least ``min_lag`` seconds). Then the frame waits as the
+    one pending frame (a newer one replaces, i.e. drops, it) and :meth:`ack` shows it. So when
+    the page keeps up nothing waits (the page itself skips an image replaced before it
+    loaded, which is the freshest way to drop), and when it does not, the images do not pile
+    up in the websocket: the lag stays bounded. Until the first acknowledgement arrives (no
+    browser: a benchmark, a test; a front end that does not run the hook) every frame is shown
+    at once; an image unacknowledged for ``timeout`` seconds no longer holds the next back.
 
     Parameters
     ----------
     show : called with a payload, in the loop thread or in the thread that calls ``ack``
-    window : images in flight at most (1: strictly one after the other)
-    timeout : seconds after which an unacknowledged image no longer holds the next one back
+    window : images in flight at most
+    min_lag : seconds; the lag limit is never shorter
+    timeout : seconds after which an unacknowledged image is forgotten
     """
 
-    WINDOW = 2
-    TIMEOUT = 0.5
+    WINDOW = 6
+    MIN_LAG = 0.15
+    TIMEOUT = 1.0
 
-    def __init__(self, show: Callable[[Any], None], *, window: int | None = None, timeout: float | None = None):
+    def __init__(self, show: Callable[[Any], None], *, window: int | None = None, min_lag: float | None = None,
+                 timeout: float | None = None):
         self._show = show
         self.window = max(1, int(self.WINDOW if window is None else window))
+        self.min_lag = float(self.MIN_LAG if min_lag is None else min_lag)
         self.timeout = float(self.TIMEOUT if timeout is None else timeout)
         self._lock = threading.Lock()
         self._show_lock = threading.Lock()  # one widget update at a time, in whichever thread
@@ -164,12 +174,18 @@ class DisplayPacer:
         self._last_shown = 0
         self.acks = 0  # acknowledgements received (any token): the front end runs the hook
         self.shown = 0
-        self.dropped = 0  # frames replaced while waiting for the browser (never shown)
-        self.round_trips: deque[float] = deque(maxlen=512)  # s, from show to its acknowledgement
+        self.held = 0  # frames that had to wait for the page
+        self.dropped = 0  # frames replaced while waiting for the page (never shown)
+        self.round_trips: deque[float] = deque(maxlen=32)  # s, from show to its acknowledgement
+
+    def lag_limit(self) -> float:
+        """Seconds the oldest image in flight may be on its way before the next one waits."""
+        rt = list(self.round_trips)
+        return max(self.min_lag, 3.0 * min(rt)) if rt else max(self.min_lag, self.timeout / 2)
 
     @property
     def pacing(self) -> bool:
-        """True once the front end acknowledges images (then at most ``window`` are in flight)."""
+        """True once the front end acknowledges images (from then on the page's lag is bounded)."""
         return self.acks > 0
 
     def next_token(self) -> int:
@@ -182,7 +198,9 @@ class DisplayPacer:
         fl = self._in_flight
         while fl and now - fl[0][1] >= self.timeout:  # lost acknowledgements do not hold the view
             fl.popleft()
-        return not self.acks or len(fl) < self.window
+        if not self.acks or not fl:
+            return True
+        return len(fl) < self.window and now - fl[0][1] < self.lag_limit()
 
     def offer(self, token: int, payload) -> bool:
         """Show ``payload`` now if the page is ready for it (returns True), else keep it pending."""
@@ -193,6 +211,7 @@ class DisplayPacer:
                 self._pending = None
             if not self._ready(now):
                 self._pending = (token, payload)
+                self.held += 1
                 return False
             self._in_flight.append((token, now))
         self._do_show(token, payload)
