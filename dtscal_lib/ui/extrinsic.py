@@ -114,9 +114,29 @@ class LiveExtrinsics:
         self.widget.children = (*self.widget.children, ack_widgets(self._pacer))
         self.widget.add_class("dtscal-tool")
         self._waiting_shown = 0.0
+        self._closed = threading.Event()
         self.loop = FrameLoop(self.source, self._on_frame, self._on_status)
         if autostart:
+            self.start()
+
+    def start(self) -> None:
+        """Start the frame loop, or, while there is no intrinsic calibration, once there is one:
+        until then the tool waits without receiving or processing frames (an idle tool costs no CPU)."""
+        if self.camera() is not None:
             self.loop.start()
+            return
+        self.status.value = render.message_html(
+            f"{self.spec}: waiting for an intrinsic calibration (CALIBRATE in the calibrator above)")
+        self.error_text.value = render.message_html(
+            "waiting for an intrinsic calibration: CALIBRATE in the calibrator above", "error")
+
+        def wait():
+            while not self._closed.wait(0.2):
+                if self.camera() is not None:
+                    self.loop.start()
+                    return
+
+        threading.Thread(target=wait, daemon=True, name="dtscal-extrinsic-wait").start()
 
     def _repr_mimebundle_(self, **kw):
         bundle = self.widget._repr_mimebundle_(**kw)
@@ -272,6 +292,7 @@ class LiveExtrinsics:
         return self._say(f"reconnecting to {self.spec}")
 
     def close(self) -> None:
+        self._closed.set()
         self.loop.close()
 
     def __enter__(self):
