@@ -4,7 +4,8 @@ Run all; the bars fill from the bundled recording; CALIBRATE, then COMMIT to a t
 calibration folder; the YAML is within 0.3 % of the truth. The extrinsic tool then fits the
 ground homography live; SAVE writes the best one, which maps the board corners within 3 mm.
 The latency from a frame's arrival in the kernel to its display in the page is measured from
-the arrival stamp the calibrator puts on every image (median under 100 ms). Screenshots are kept
+the arrival stamp the calibrator puts on every image, to the animation frame after the image's
+load event (median under 100 ms), from the first live image until the bars are full. Screenshots are kept
 in a folder under the system's temporary folder (the path is printed).
 """
 
@@ -32,21 +33,28 @@ pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOK = ROOT / "notebooks" / "06_duckiebot_camera.ipynb"
 
-#: installed on every live image once: records (display time - arrival time) at each image load
+#: installed once in the page: for every live image that loads, records [tool, arrival stamp (ms), load time,
+#: time of the next animation frame (the one that paints it)]; ``window.__lat`` starts empty
 LATENCY_JS = """() => {
-  window.__lat = window.__lat || [];
-  const hook = (img) => {
-    if (img.__dtscal) return;
-    img.__dtscal = true;
-    img.addEventListener('load', () => {
-      const c = [...img.classList].find((k) => k.startsWith('dtscal-at-'));
-      if (c) window.__lat.push(Date.now() - Number(c.slice(10)));
-    });
-  };
-  document.querySelectorAll('img.dtscal-live').forEach(hook);
-  new MutationObserver(() => document.querySelectorAll('img.dtscal-live').forEach(hook))
-    .observe(document.body, {subtree: true, childList: true, attributes: true, attributeFilter: ['class']});
+  window.__lat = [];
+  if (window.__latHook) return;
+  window.__latHook = true;
+  document.addEventListener('load', (e) => {
+    const img = e.target;
+    if (!img.classList || !img.classList.contains('dtscal-live')) return;
+    const t = Date.now();
+    const at = [...img.classList].find((k) => k.startsWith('dtscal-at-'));
+    const tool = [...img.classList].find((k) => k.startsWith('dtscal-live-'));
+    if (!at) return;
+    requestAnimationFrame(() => window.__lat.push([tool ? tool.slice(12) : '', Number(at.slice(10)), t, Date.now()]));
+  }, true);
 }"""
+
+
+def latency_summary(records: list, tool: str) -> tuple[np.ndarray, np.ndarray]:
+    """(load - arrival, paint frame - arrival) in ms of the images of ``tool`` in ``window.__lat``."""
+    r = [x for x in records if x[0] == tool]
+    return (np.array([x[2] - x[1] for x in r], dtype=float), np.array([x[3] - x[1] for x in r], dtype=float))
 
 
 def _playwright():
@@ -128,11 +136,12 @@ def _drive_notebook_06(url: str, token: str, shots: Path, calib_dir: Path) -> li
             except Exception:
                 pass
             page.wait_for_selector("#jp-main-statusbar :text('Idle')", timeout=120_000)
-            page.evaluate(LATENCY_JS)
             page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
             page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
-            # the calibrator's image arrives, then its bars fill from the recording
-            page.wait_for_selector("img.dtscal-live", timeout=120_000)
+            # the calibrator's image arrives, then its bars fill from the recording; the latency is
+            # measured from the first live image on (JupyterLab's start and Run All excluded) until they are full
+            page.wait_for_selector("img.dtscal-live-intrinsic", timeout=120_000)
+            page.evaluate(LATENCY_JS)
             page.screenshot(path=str(shots / "01_running.png"))
             page.wait_for_function("document.querySelectorAll('.dtscal-bar[data-full=\"1\"]').length >= 4",
                                    timeout=180_000)
@@ -197,8 +206,14 @@ def test_notebook_06_calibrates_commits_and_saves_extrinsics_in_the_browser(lab,
     err_mm = 1000 * np.linalg.norm(on_ground - np.asarray(ext["ground_points"]), axis=1)
     assert err_mm.max() < 3.0, f"worst board corner {err_mm.max():.2f} mm from the truth"
 
-    assert len(lat) >= 20, f"only {len(lat)} frames displayed while the bars filled"
-    median = float(np.median(lat))
-    print(f"frame arrival -> display in the browser: median {median:.1f} ms, p90 {np.percentile(lat, 90):.1f} ms "
-          f"over {len(lat)} frames")
+    # the acceptance figure: the calibrator's images, arrival in the kernel -> the animation frame that paints them
+    for tool in ("intrinsic", "extrinsic"):
+        loaded, painted = latency_summary(lat, tool)
+        if len(painted):
+            print(f"{tool} tool, frame arrival -> display in the browser over {len(painted)} images: painted median "
+                  f"{np.median(painted):.1f} ms, p90 {np.percentile(painted, 90):.1f} ms (loaded: median "
+                  f"{np.median(loaded):.1f} ms, p90 {np.percentile(loaded, 90):.1f} ms)")
+    loaded, painted = latency_summary(lat, "intrinsic")
+    assert len(painted) >= 20, f"only {len(painted)} frames displayed while the bars filled"
+    median = float(np.median(painted))
     assert median < 100, f"median latency {median:.1f} ms"

@@ -34,6 +34,9 @@ class Frame:
         ``"truncated"``, ...).
     name : str
         Human-readable origin, e.g. ``"intrinsics.bag#17"`` or ``"img_003.png"``.
+    arrival : float or None
+        Live sources: when the frame arrived in this process (``time.time()``, before decoding);
+        the live tools stamp their images with it to measure the latency to the browser.
     """
 
     index: int
@@ -41,6 +44,7 @@ class Frame:
     image: np.ndarray | None
     error: FrameError | None
     name: str
+    arrival: float | None = None
 
     @property
     def ok(self) -> bool:

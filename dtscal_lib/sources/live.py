@@ -166,9 +166,11 @@ class LiveSource:
     def _halt(self) -> None:
         """Unblock :meth:`_run` (kill a helper, release a capture); called on close/reconnect."""
 
-    def _push(self, image: np.ndarray, stamp: float, name: str) -> None:
+    def _push(self, image: np.ndarray, stamp: float, name: str, arrival: float | None = None) -> None:
+        arrival = time.time() if arrival is None else arrival
         with self._cond:
-            f = Frame(index=self._received, stamp=float(stamp), image=image, error=None, name=name)
+            f = Frame(index=self._received, stamp=float(stamp), image=image, error=None, name=name,
+                      arrival=arrival)
             self._received += 1
             self._newest = f
             if self._state != "running":
@@ -182,12 +184,13 @@ class LiveSource:
 
     def _push_bytes(self, data: bytes, stamp: float, name: str) -> None:
         """Decode an encoded frame with the guarded decoder; count it as bad when it does not decode."""
+        arrival = time.time()  # the frame's arrival: decoding is part of its latency
         try:
             image = decode_image(data)
         except FrameError as exc:
             self._push_bad(exc.reason)
             return
-        self._push(image, stamp, name)
+        self._push(image, stamp, name, arrival)
 
     def _set_state(self, state: str, message: str) -> None:
         with self._cond:

@@ -36,7 +36,7 @@ from ..errors import DtscalError
 from ..ground import birdseye_view, draw_ground_grid, extrinsics_from_image, pixel_to_ground
 from . import render
 from ..sources.live import open_live
-from .frameloop import FrameLoop
+from .frameloop import DisplayPacer, FrameLoop, ack_widgets
 from .intrinsic import rectification_maps_fast, robot_of
 
 
@@ -124,9 +124,34 @@ class LiveExtrinsics:
                    "and a bird's-eye view"),
             w.HBox([self.grid, self.birdseye]),
         ])
+        # the views go out no faster than the page displays them (the newest waits, older are dropped)
+        self._pacer = DisplayPacer(self._display)
+        self.widget.children = (*self.widget.children, ack_widgets(self._pacer))
+        self.widget.add_class("dtscal-tool")
+        self._waiting_shown = 0.0
+        self._closed = threading.Event()
         self.loop = FrameLoop(self.source, self._on_frame, self._on_status)
         if autostart:
+            self.start()
+
+    def start(self) -> None:
+        """Start the frame loop, or, while there is no intrinsic calibration, once there is one:
+        until then the tool waits without receiving or processing frames (an idle tool costs no CPU)."""
+        if self.camera() is not None:
             self.loop.start()
+            return
+        self.status.value = render.message_html(
+            f"{self.spec}: waiting for an intrinsic calibration (CALIBRATE in the calibrator above)")
+        self.error_text.value = render.message_html(
+            "waiting for an intrinsic calibration: CALIBRATE in the calibrator above", "error")
+
+        def wait():
+            while not self._closed.wait(0.2):
+                if self.camera() is not None:
+                    self.loop.start()
+                    return
+
+        threading.Thread(target=wait, daemon=True, name="dtscal-extrinsic-wait").start()
 
     def _repr_mimebundle_(self, **kw):
         bundle = self.widget._repr_mimebundle_(**kw)
@@ -160,20 +185,28 @@ class LiveExtrinsics:
         self.state = st.state
         self.status.value = render.source_status_html(self.spec, st, dict(st.bad), "The best fit is kept")
 
+    #: while there is no intrinsic calibration the tool idles: one camera frame per this many seconds
+    WAITING_PERIOD = 1.0
+
     def _on_frame(self, frame) -> bool | None:
-        arrival = getattr(frame, "arrival", None) or time.time()
+        arrival = getattr(frame, "arrival", None) or time.time()  # frames made by hand have none
         img = frame.image
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
             self.bad["odd_frame"] += 1
             return False
         self.frames_seen += 1
         cam = self.camera()
-        if cam is None:
-            with self.image.hold_sync():
-                self.image.value = render.encode_jpeg(img)
-                self.image._dom_classes = render.stamp_classes(frame.index, arrival)
+        if cam is None:  # idle: show the camera now and then, and let the loop rest (no CPU burnt)
+            now = time.monotonic()
+            if now - self._waiting_shown < self.WAITING_PERIOD:
+                self.loop.idle(self.WAITING_PERIOD / 4)
+                return False
+            self._waiting_shown = now
             self.error_text.value = render.message_html(
                 "waiting for an intrinsic calibration: CALIBRATE in the calibrator above", "error")
+            token = self._pacer.next_token()
+            self._pacer.offer(token, (img, None, None, -1, None, frame.index, arrival, token))
+            self.loop.idle(self.WAITING_PERIOD / 4)
             return
         if (img.shape[1], img.shape[0]) != cam.size:
             self.bad["size_mismatch"] += 1
@@ -186,8 +219,6 @@ class LiveExtrinsics:
         except cv2.error:
             res, self.reason = None, "OpenCV could not process this frame"
             self.bad["detector_error"] += 1
-        view = rect.copy()
-        fit = None
         if res is not None:
             err = float(np.mean(res.residual_mm))
             with self._lock:
@@ -195,28 +226,47 @@ class LiveExtrinsics:
                 if self.best is None or err < float(np.mean(self.best.residual_mm)):
                     self.best, self.best_frame = res, frame.index
                 best = self.best
-            for p in res.corners_rectified:
-                cv2.circle(view, (int(round(p[0])), int(round(p[1]))), 3, (0, 0, 255), -1, cv2.LINE_AA)
-            fit = pixel_to_ground(res.H, res.corners_rectified)
-            best_err = float(np.mean(best.residual_mm))
-            self.error_text.value = (
-                f'<div class="dtscal-fit" data-now="{err:.4f}" data-best="{best_err:.4f}">'
-                f"fit error now: <b>{err:.2f} mm</b> (max {np.max(res.residual_mm):.2f} mm)<br>"
-                f"best so far: <b>{best_err:.2f} mm</b> (frame {self.best_frame})</div>")
             if self.save_button.disabled:
                 self.save_button.disabled = False
         else:
             with self._lock:
                 self.current = None
                 best = self.best
-            self.error_text.value = render.message_html(f"no fit on this frame: {self.reason}", "error")
-        with self.image.hold_sync():
-            self.image.value = render.encode_jpeg(view)
-            self.image._dom_classes = render.stamp_classes(frame.index, arrival)
+        token = self._pacer.next_token()
+        reason = "" if res is not None else self.reason
+        self._pacer.offer(token, (rect, res, best, self.best_frame, reason, frame.index, arrival, token))
+
+    def _display(self, payload) -> None:
+        """Put one processed frame into the views (called by the display pacer): the camera view
+        with its arrival stamp, the fit error, the top view and the validation views. Drawing
+        happens here, so a frame the page has no time for costs nothing more."""
+        image, res, best, best_frame, reason, index, arrival, token = payload
+        if res is best is reason is None:  # waiting for the intrinsics: the camera view only
+            self._show_image(image, index, arrival, token)
+            return
+        view = image.copy()
+        fit = None
+        if res is not None:
+            for p in res.corners_rectified:
+                cv2.circle(view, (int(round(p[0])), int(round(p[1]))), 3, (0, 0, 255), -1, cv2.LINE_AA)
+            fit = pixel_to_ground(res.H, res.corners_rectified)
+            err, best_err = float(np.mean(res.residual_mm)), float(np.mean(best.residual_mm))
+            self.error_text.value = (
+                f'<div class="dtscal-fit" data-now="{err:.4f}" data-best="{best_err:.4f}">'
+                f"fit error now: <b>{err:.2f} mm</b> (max {np.max(res.residual_mm):.2f} mm)<br>"
+                f"best so far: <b>{best_err:.2f} mm</b> (frame {best_frame})</div>")
+        else:
+            self.error_text.value = render.message_html(f"no fit on this frame: {reason}", "error")
+        self._show_image(view, index, arrival, token)
         self.top.value = render.encode_jpeg(render.top_view(self.ground_true, fit))
         if best is not None:
-            self.grid.value = render.encode_jpeg(draw_ground_grid(rect, best.H))
-            self.birdseye.value = render.encode_jpeg(birdseye_view(rect, best.H, px_per_m=600))
+            self.grid.value = render.encode_jpeg(draw_ground_grid(image, best.H))
+            self.birdseye.value = render.encode_jpeg(birdseye_view(image, best.H, px_per_m=600))
+
+    def _show_image(self, view, index, arrival, token) -> None:
+        with self.image.hold_sync():
+            self.image.value = render.encode_jpeg(view)
+            self.image._dom_classes = render.stamp_classes(index, arrival, token, "extrinsic")
 
     # ------------------------------------------------------------------ actions
     def save(self) -> str:
@@ -260,6 +310,7 @@ class LiveExtrinsics:
         return self._say(f"reconnecting to {self.spec}")
 
     def close(self) -> None:
+        self._closed.set()
         self.loop.close()
 
     def __enter__(self):

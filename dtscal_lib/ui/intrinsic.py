@@ -41,7 +41,7 @@ from ..pipeline import MIN_SAMPLES, calibrate_without_outlier_views, robot_from_
 from . import render
 from .archive import load_session, save_session
 from ..sources.live import open_live
-from .frameloop import FrameLoop
+from .frameloop import DisplayPacer, FrameLoop, ack_widgets
 from .solver import SolverProcess, assess_quality
 
 
@@ -161,6 +161,10 @@ class LiveCalibrator:
             w.HTML("<b>undistorted live preview</b> (after CALIBRATE; alpha 0 crops to valid pixels, 1 keeps all)"),
             self.alpha, self.preview,
         ])
+        # live images go out no faster than the page displays them (the newest waits, older are dropped)
+        self._pacer = DisplayPacer(self._display)
+        self.widget.children = (*self.widget.children, ack_widgets(self._pacer))
+        self.widget.add_class("dtscal-tool")
         self.loop = FrameLoop(self.source, self._on_frame, self._on_status)
         if autostart:
             self.loop.start()
@@ -179,7 +183,7 @@ class LiveCalibrator:
 
     def _on_frame(self, frame) -> bool | None:
         """The loop body: detect, offer to coverage, draw, encode, publish (False: frame skipped)."""
-        arrival = getattr(frame, "arrival", None) or time.time()
+        arrival = getattr(frame, "arrival", None) or time.time()  # frames made by hand have none
         img = frame.image
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
             return self._skip("odd_frame")
@@ -204,10 +208,8 @@ class LiveCalibrator:
         self.frames_seen += 1
         self.last_frame = img
         drawn = draw_detection(img, det)
-        jpeg = render.encode_jpeg(drawn)
-        with self.image.hold_sync():
-            self.image.value = jpeg
-            self.image._dom_classes = render.stamp_classes(frame.index, arrival)
+        token = self._pacer.next_token()
+        self._pacer.offer(token, (drawn, img, frame.index, arrival, token))
         if added:
             self.bars.value = render.bars_html(bars)
             self.count.value = f"samples: {n}"
@@ -215,6 +217,15 @@ class LiveCalibrator:
         enable = ready and not self.calibrating and n >= MIN_SAMPLES
         if self.calibrate_button.disabled == enable:
             self.calibrate_button.disabled = not enable
+
+    def _display(self, payload) -> None:
+        """Put one processed frame into the widgets (called by the display pacer): the image with
+        its arrival stamp, and the undistorted preview once there is a calibration."""
+        drawn, img, index, arrival, token = payload
+        jpeg = render.encode_jpeg(drawn)
+        with self.image.hold_sync():
+            self.image.value = jpeg
+            self.image._dom_classes = render.stamp_classes(index, arrival, token, "intrinsic")
         if self.result is not None:
             self._show_preview(img)
 

@@ -25,13 +25,21 @@ def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     return buf.tobytes()
 
 
-def stamp_classes(index: int, arrival: float) -> tuple[str, str, str]:
+def stamp_classes(index: int, arrival: float, shown: int | None = None, tool: str = "") -> tuple[str, ...]:
     """CSS classes that tag a live image with its frame and its arrival time (ms since the epoch).
 
     They travel in the same widget update as the image, so a page (the browser test) can
-    measure the time from a frame's arrival in the kernel to its display.
+    measure the time from a frame's arrival in the kernel to its display. ``shown`` is the
+    display pacer's token, which the page echoes back once the image has loaded
+    (:class:`~dtscal_lib.ui.frameloop.DisplayPacer`); ``tool`` names the tool
+    (``dtscal-live-<tool>``).
     """
-    return ("dtscal-live", f"dtscal-frame-{int(index)}", f"dtscal-at-{int(round(arrival * 1000))}")
+    classes = ["dtscal-live", f"dtscal-frame-{int(index)}", f"dtscal-at-{int(round(arrival * 1000))}"]
+    if shown is not None:
+        classes.append(f"dtscal-shown-{int(shown)}")
+    if tool:
+        classes.append(f"dtscal-live-{tool}")
+    return tuple(classes)
 
 
 def thumbnail(image: np.ndarray, corners: np.ndarray | None, width: int = 96) -> bytes:
