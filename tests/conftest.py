@@ -25,19 +25,14 @@ SERIAL_FILES = {
     "test_browser_live.py",  # measures the latency from a frame's arrival to its display in the page
 }
 
-#: the longest files (measured), started first by the parallel part so that the two workers end together;
-#: every other file keeps its collection order after them
+#: the longest files (measured with --durations, longest first), started first by the parallel part so that
+#: the two workers end together; every other file keeps its collection order after them
 LONGEST_FIRST = (
-    "test_synth_regenerate.py",
-    "test_handout.py",
-    "test_outputs_portable.py",
-    "test_hostile_input.py",
-    "test_notebooks.py",
-    "test_ros_live.py",
-    "test_grading_nbval.py",
-    "test_ros_bag_play.py",
-    "test_grading_handout.py",
-    "test_ui_ros.py",
+    "test_notebooks.py", "test_ros_live.py", "test_pipeline.py", "test_synth_regenerate.py", "test_plausibility.py",
+    "test_synth.py", "test_handout.py", "test_outputs_portable.py", "test_report.py", "test_quality.py",
+    "test_live_sources.py", "test_grading_sandbox.py", "test_notebook_text.py", "test_ui_calibrator.py",
+    "test_ui_ros.py", "test_detect_real.py", "test_hostile_input.py", "test_grading_handout.py",
+    "test_grading_nbval.py", "test_ros_bag_play.py", "test_course_command.py",
 )
 
 PARTS = ("all", "parallel", "serial")
