@@ -16,6 +16,7 @@ frame-to-page latency).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -42,6 +43,14 @@ def pytest_addoption(parser):
     parser.addoption("--dtscal-part", choices=PARTS, default="all",
                      help="run only the tests not marked serial (parallel), only the serial ones (serial), or all "
                           "(the default); scripts/test.sh runs 'parallel' under pytest-xdist, then 'serial'")
+
+
+@pytest.fixture(scope="session")
+def notebook_runs(tmp_path_factory) -> Path:
+    """A folder for notebook runs that several tests check (``nbtools.execute_student_once``), one per pytest run,
+    shared by its xdist workers (their temporary folders are siblings)."""
+    base = tmp_path_factory.getbasetemp()
+    return (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "notebook-runs"
 
 
 def _is_serial(item) -> bool:
