@@ -6,8 +6,8 @@ import nbformat
 import pytest
 
 from dtscal_lib.release import inject_solutions
-from nbtools import (COURSE, NOTEBOOK_BUDGET_S, NOTEBOOKS, SOLUTIONS, cell_errors, execute, exercise_functions, need,
-                     reports)
+from nbtools import (COURSE, NOTEBOOK_BUDGET_S, NOTEBOOKS, SOLUTIONS, cell_errors, execute, execute_student_once,
+                     exercise_functions, need, reports)
 
 pytestmark = pytest.mark.slow
 
@@ -17,8 +17,8 @@ def _student(name):
 
 
 @pytest.mark.parametrize("name", COURSE)
-def test_untouched_student_notebook_runs_and_reports_not_implemented(name):
-    nb, seconds = execute(_student(name))
+def test_untouched_student_notebook_runs_and_reports_not_implemented(name, notebook_runs):
+    nb, seconds = execute_student_once(name, notebook_runs)  # the run test_notebook_text also checks
     assert not cell_errors(nb), f"{name}: errors escaped cells: {cell_errors(nb)}"
     found = reports(nb)
     wanted = exercise_functions(nb)
