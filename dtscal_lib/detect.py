@@ -279,7 +279,7 @@ def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
     # nearest saddle (a tilted board's rows and columns differ in spacing), similar strength
     # (same board, similar contrast)
     turn = np.abs(((ang[idx] - ang[:, None]) % np.pi) - np.pi / 2) < 0.4
-    close = dist < 2.0 * np.maximum(dist[:, :1], 1e-9)
+    close = dist < 2.0 * np.maximum(dist[:, 1:2], 1e-9)
     similar = np.abs(np.log(strength[idx] / strength[:, None])) < math.log(6.0)
     ok = (turn & close & similar).ravel()
     rows = np.repeat(np.arange(n), idx.shape[1])[ok]
