@@ -15,8 +15,10 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
    neighbour along a row or column, the saddle's principal direction turns by 90 degrees
    (the dark diagonal becomes the light one).
 2. **Grid clusters** (:func:`board_regions`). Saddles are linked to nearby saddles of
-   similar strength whose principal direction differs by about 90 degrees (mutual
-   links only); a connected cluster with at least 80 % as many saddles as the board has
+   similar strength whose principal direction differs by about 90 degrees, at most twice as
+   far as the second-nearest saddle (mutual links only; the second-nearest, not the nearest:
+   a board whose outer squares are cut narrow has saddles on its physical edge less than half
+   a square from its outer corners); a connected cluster with at least 80 % as many saddles as the board has
    inner corners is a board candidate (its box is tried together with sizeable clusters
    right next to it, as a board seen edge-on can split into pieces, then alone). Clutter
    rarely produces such clusters: blocky texture gives many saddles, but with random
@@ -24,7 +26,13 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
 3. **Classic detection on the candidate region only**: ``findChessboardCorners`` on the
    cluster's bounding box plus a margin (ROS's flags without ``FAST_CHECK``, whose quick
    test rejects many tightly cropped boards; small regions are tried again at twice the
-   size).
+   size). The live detector bounds this step's work (the classic detector answers in 1-5 ms
+   where it finds a board, but spends 10-35 ms per region where it does not, typically on a
+   board cut by the image edge, which the border rule rejects anyway): a region nearly the
+   same as one already tried is skipped, a cluster of large squares (saddle spacing >= 20 px)
+   is searched at full size only if a search at half size finds the board, and a small
+   region touching the image edge gets no 2x retry.
+   :func:`detect_board_still` then makes every skipped attempt where the live path found nothing.
 4. **Sub-pixel refinement that stays inside each corner's own squares**
    (:func:`refine_corners_checked`). ROS refines every corner with one ``cornerSubPix``
    window of half the smallest corner spacing; on real boards (outer squares cut narrow,
@@ -992,11 +1000,12 @@ def _detect_in_regions(gray: np.ndarray, board: Board, border_margin: float, liv
     in 1-5 ms where it finds a board but spends 10-35 ms per region where it does not, mostly
     on boards cut by the image edge, which the border rule would reject anyway):
 
-    - a region whose box differs from an already tried one by at most half a square on each side
+    - a region whose box differs from an already tried one by at most a square on each side
       is skipped (a split board's merged box and the seed's own box are often nearly the same);
-    - a cluster of large squares (saddle spacing at least :data:`HALF_SIZE_SPACING`) is searched
-      on the region downsampled by 2 only (squares of 10 px or more are still found there, at a
-      quarter of the cost);
+    - a cluster of large squares (saddle spacing at least :data:`HALF_SIZE_SPACING`) is first
+      searched on the region downsampled by 2 (squares of 10 px or more are still found there, at
+      a quarter of the cost); only if the board is found there is the full-size search made, whose
+      corners are used (so they are those of the thorough order);
     - the 2x retry of small regions is not made for a region that touches the image edge (a
       small board there is nearly always cut by the edge).
     """
@@ -1007,11 +1016,19 @@ def _detect_in_regions(gray: np.ndarray, board: Board, border_margin: float, liv
         roi = gray[y0:y1, x0:x1]
         if min(roi.shape) < 16:  # OpenCV's adaptive threshold needs a few pixels
             continue
-        if live and any(_same_box(cand.box, t, 0.5 * cand.spacing) for t in tried):
+        if live and any(_same_box(cand.box, t, cand.spacing) for t in tried):
             continue
         tried.append(cand.box)
         if live and cand.spacing >= HALF_SIZE_SPACING:
-            scales = [0.5]
+            # a quick test at half size; the corners then come from the full-size search as in
+            # the thorough order (the same start, so the same refined corners), or from the
+            # half-size one if the full-size search fails
+            half = _classic(roi, board, 0.5)
+            if half is None:
+                continue
+            raw = _classic(roi, board, 1.0)
+            raw = half if raw is None else raw
+            return _finish(gray, raw + (x0, y0), board, border_margin)
         else:
             scales = [1.0]
             at_edge = x0 == 0 or y0 == 0 or x1 == w or y1 == h
@@ -1047,7 +1064,9 @@ def detect_board_still(image, board: Board = DUCKIETOWN_BOARD, *,
                        border_margin: float = BORDER_MARGIN_PX) -> Detection:
     """Thorough detection for a single still frame, where time does not matter.
 
-    :func:`detect_board` first; when it finds nothing, OpenCV's classic detector on the
+    :func:`detect_board` first (so both refine identically where it finds the board); when it
+    finds nothing, the candidate regions again with every attempt the live path skips to bound
+    its time (full size, 2x retries), then OpenCV's classic detector on the
     whole frame with ``ADAPTIVE_THRESH | NORMALIZE_IMAGE`` and no ``FAST_CHECK``, as
     Duckietown's extrinsic calibration runs it. On a rectified floor view the far squares
     are only about 12 px tall; ``FAST_CHECK`` and the region search can miss such a board
