@@ -15,8 +15,10 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
    neighbour along a row or column, the saddle's principal direction turns by 90 degrees
    (the dark diagonal becomes the light one).
 2. **Grid clusters** (:func:`board_regions`). Saddles are linked to nearby saddles of
-   similar strength whose principal direction differs by about 90 degrees (mutual
-   links only); a connected cluster with at least 80 % as many saddles as the board has
+   similar strength whose principal direction differs by about 90 degrees, at most twice as
+   far as the second-nearest saddle (mutual links only; the second-nearest, not the nearest:
+   a board whose outer squares are cut narrow has saddles on its physical edge less than half
+   a square from its outer corners); a connected cluster with at least 80 % as many saddles as the board has
    inner corners is a board candidate (its box is tried together with sizeable clusters
    right next to it, as a board seen edge-on can split into pieces, then alone). Clutter
    rarely produces such clusters: blocky texture gives many saddles, but with random
@@ -24,7 +26,13 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
 3. **Classic detection on the candidate region only**: ``findChessboardCorners`` on the
    cluster's bounding box plus a margin (ROS's flags without ``FAST_CHECK``, whose quick
    test rejects many tightly cropped boards; small regions are tried again at twice the
-   size).
+   size). The live detector bounds this step's work (the classic detector answers in 1-5 ms
+   where it finds a board, but spends 10-35 ms per region where it does not, typically on a
+   board cut by the image edge, which the border rule rejects anyway): a region nearly the
+   same as one already tried is skipped, a cluster of large squares (saddle spacing >= 20 px)
+   is searched at full size only if a search at half size finds the board, and a small
+   region touching the image edge gets no 2x retry.
+   :func:`detect_board_still` then makes every skipped attempt where the live path found nothing.
 4. **Sub-pixel refinement that stays inside each corner's own squares**
    (:func:`refine_corners_checked`). ROS refines every corner with one ``cornerSubPix``
    window of half the smallest corner spacing; on real boards (outer squares cut narrow,
@@ -79,6 +87,10 @@ MIN_REGION_SIDE = 48
 #: a region whose longer side is at most this is tried again at twice the size if the
 #: classic detector fails on it (small, far boards: its quads are too small at 1x)
 UPSCALE_REGION_SIDE = 240
+
+#: in the live detector, a candidate whose saddles are at least this far apart (pixels) is
+#: searched on its region downsampled by 2 (squares of 10 px or more are found there)
+HALF_SIZE_SPACING = 20.0
 
 #: pieces of a split board are merged if they come within this many saddle spacings of the seed
 MERGE_REACH = 3.0
@@ -247,6 +259,21 @@ def board_regions(gray: np.ndarray, board: Board = DUCKIETOWN_BOARD, *, max_regi
     pieces lying right next to it (if any), then its own box. Empty when nothing looks
     like a board.
     """
+    return [c.box for c in _candidates(gray, board, max_regions=max_regions, min_fraction=min_fraction)]
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    """A region to try: its box, the saddles of its cluster(s) and their spacing (pixels)."""
+
+    box: tuple[int, int, int, int]
+    saddles: np.ndarray
+    spacing: float
+
+
+def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
+                min_fraction: float = 0.8) -> list[_Candidate]:
+    """:func:`board_regions` with each box's saddle cluster (see there)."""
     h, w = gray.shape[:2]
     pts, ang, strength = find_saddles(gray)
     n = len(pts)
@@ -260,7 +287,7 @@ def board_regions(gray: np.ndarray, board: Board = DUCKIETOWN_BOARD, *, max_regi
     # nearest saddle (a tilted board's rows and columns differ in spacing), similar strength
     # (same board, similar contrast)
     turn = np.abs(((ang[idx] - ang[:, None]) % np.pi) - np.pi / 2) < 0.4
-    close = dist < 2.0 * np.maximum(dist[:, :1], 1e-9)
+    close = dist < 2.0 * np.maximum(dist[:, 1:2], 1e-9)
     similar = np.abs(np.log(strength[idx] / strength[:, None])) < math.log(6.0)
     ok = (turn & close & similar).ravel()
     rows = np.repeat(np.arange(n), idx.shape[1])[ok]
@@ -269,7 +296,7 @@ def board_regions(gray: np.ndarray, board: Board = DUCKIETOWN_BOARD, *, max_regi
     adj = adj.multiply(adj.T)  # mutual links only
     _, label = connected_components(adj, directed=False)
     sizes = np.bincount(label)
-    regions: list[tuple[int, int, int, int]] = []
+    regions: list[_Candidate] = []
     for seed in np.argsort(-sizes)[:max_regions]:
         if sizes[seed] < need:
             break
@@ -278,7 +305,7 @@ def board_regions(gray: np.ndarray, board: Board = DUCKIETOWN_BOARD, *, max_regi
         # the cluster already includes the board's outer row of squares; add room for its
         # white margin and for corners the saddle test missed
         pad = 1.5 * spacing + 4.0
-        regions.append(_box_around(pts[members], pad, w, h))
+        regions.append(_Candidate(_box_around(pts[members], pad, w, h), pts[members], spacing))
         # a strongly foreshortened board (e.g. lying on the floor) can split into pieces where
         # its row and column spacings differ more than the link rule allows: first try the
         # box that also holds the pieces of at least 4 saddles within MERGE_REACH spacings
@@ -286,9 +313,10 @@ def board_regions(gray: np.ndarray, board: Board = DUCKIETOWN_BOARD, *, max_regi
         group = np.unique(label[np.isfinite(near)])
         group = group[(sizes[group] >= 4) & (group != seed)]
         if len(group):
-            merged = _box_around(pts[np.isin(label, np.append(group, seed))], pad, w, h)
-            if merged != regions[-1]:
-                regions.insert(len(regions) - 1, merged)
+            inside = pts[np.isin(label, np.append(group, seed))]
+            merged = _box_around(inside, pad, w, h)
+            if merged != regions[-1].box:
+                regions.insert(len(regions) - 1, _Candidate(merged, inside, spacing))
     return regions
 
 
@@ -946,19 +974,70 @@ def detect_board(image, board: Board = DUCKIETOWN_BOARD, *,
     """
     _check_inputs(board, border_margin)
     gray = to_gray(image)
+    return _detect_in_regions(gray, board, border_margin, live=True)
+
+
+def _classic(roi: np.ndarray, board: Board, scale: float):
+    """The classic detector on ``roi`` resized by ``scale``; corners in ``roi``'s pixels or None."""
+    img = roi if scale == 1 else cv2.resize(
+        roi, None, fx=scale, fy=scale, interpolation=cv2.INTER_LINEAR if scale > 1 else cv2.INTER_AREA)
+    ok, raw = cv2.findChessboardCorners(img, board.pattern_size, flags=REGION_FLAGS)
+    if not ok:
+        return None
+    # pixel centres: resized pixel k sits at (k + 0.5) / scale - 0.5 in the region
+    return (raw.reshape(-1, 2).astype(np.float64) + 0.5) / scale - 0.5
+
+
+def _same_box(a, b, tol: float) -> bool:
+    return all(abs(p - q) <= tol for p, q in zip(a, b))
+
+
+def _detect_in_regions(gray: np.ndarray, board: Board, border_margin: float, live: bool) -> Detection:
+    """Classic detection in the saddle clusters' regions (see :func:`detect_board`).
+
+    ``live=False`` is the original, thorough order: every region at full size, small ones again
+    at twice the size. ``live=True`` bounds the work per frame (the classic detector answers
+    in 1-5 ms where it finds a board but spends 10-35 ms per region where it does not, mostly
+    on boards cut by the image edge, which the border rule would reject anyway):
+
+    - a region whose box differs from an already tried one by at most a square on each side
+      is skipped (a split board's merged box and the seed's own box are often nearly the same);
+    - a cluster of large squares (saddle spacing at least :data:`HALF_SIZE_SPACING`) is first
+      searched on the region downsampled by 2 (squares of 10 px or more are still found there, at
+      a quarter of the cost); only if the board is found there is the full-size search made, whose
+      corners are used (so they are those of the thorough order);
+    - the 2x retry of small regions is not made for a region that touches the image edge (a
+      small board there is nearly always cut by the edge).
+    """
     h, w = gray.shape
-    for x0, y0, x1, y1 in board_regions(gray, board):
+    tried: list[tuple[int, int, int, int]] = []
+    for cand in _candidates(gray, board):
+        x0, y0, x1, y1 = cand.box
         roi = gray[y0:y1, x0:x1]
         if min(roi.shape) < 16:  # OpenCV's adaptive threshold needs a few pixels
             continue
-        ok, raw = cv2.findChessboardCorners(roi, board.pattern_size, flags=REGION_FLAGS)
-        if not ok and max(roi.shape) <= UPSCALE_REGION_SIDE:
-            big = cv2.resize(roi, None, fx=2.0, fy=2.0, interpolation=cv2.INTER_LINEAR)
-            ok, raw = cv2.findChessboardCorners(big, board.pattern_size, flags=REGION_FLAGS)
-            if ok:  # pixel centres: big pixel k sits at (k + 0.5) / 2 - 0.5 in the region
-                raw = (raw.reshape(-1, 2).astype(np.float64) + 0.5) / 2.0 - 0.5
-        if ok:
-            return _finish(gray, raw.reshape(-1, 2).astype(np.float64) + (x0, y0), board, border_margin)
+        if live and any(_same_box(cand.box, t, cand.spacing) for t in tried):
+            continue
+        tried.append(cand.box)
+        if live and cand.spacing >= HALF_SIZE_SPACING:
+            # a quick test at half size; the corners then come from the full-size search as in
+            # the thorough order (the same start, so the same refined corners), or from the
+            # half-size one if the full-size search fails
+            half = _classic(roi, board, 0.5)
+            if half is None:
+                continue
+            raw = _classic(roi, board, 1.0)
+            raw = half if raw is None else raw
+            return _finish(gray, raw + (x0, y0), board, border_margin)
+        else:
+            scales = [1.0]
+            at_edge = x0 == 0 or y0 == 0 or x1 == w or y1 == h
+            if max(roi.shape) <= UPSCALE_REGION_SIDE and not (live and at_edge):
+                scales.append(2.0)
+        for scale in scales:
+            raw = _classic(roi, board, scale)
+            if raw is not None:
+                return _finish(gray, raw + (x0, y0), board, border_margin)
     return Detection(False, None, REASON_NO_BOARD, board, (w, h))
 
 
@@ -985,7 +1064,9 @@ def detect_board_still(image, board: Board = DUCKIETOWN_BOARD, *,
                        border_margin: float = BORDER_MARGIN_PX) -> Detection:
     """Thorough detection for a single still frame, where time does not matter.
 
-    :func:`detect_board` first; when it finds nothing, OpenCV's classic detector on the
+    :func:`detect_board` first (so both refine identically where it finds the board); when it
+    finds nothing, the candidate regions again with every attempt the live path skips to bound
+    its time (full size, 2x retries), then OpenCV's classic detector on the
     whole frame with ``ADAPTIVE_THRESH | NORMALIZE_IMAGE`` and no ``FAST_CHECK``, as
     Duckietown's extrinsic calibration runs it. On a rectified floor view the far squares
     are only about 12 px tall; ``FAST_CHECK`` and the region search can miss such a board
@@ -996,6 +1077,9 @@ def detect_board_still(image, board: Board = DUCKIETOWN_BOARD, *,
     if det.found or det.reason == REASON_AT_BORDER:
         return det
     gray = to_gray(image)
+    thorough = _detect_in_regions(gray, board, border_margin, live=False)
+    if thorough.found or thorough.reason == REASON_AT_BORDER:
+        return thorough
     ok, raw = cv2.findChessboardCorners(gray, board.pattern_size, flags=REGION_FLAGS)
     if not ok:
         return det
