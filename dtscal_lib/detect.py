@@ -459,7 +459,8 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     g = pts[win]
     outside = np.concatenate([2 * g[0] - g[1], 2 * g[-1] - g[-2], 2 * g[:, 0] - g[:, 1], 2 * g[:, -1] - g[:, -2]])
     step = np.concatenate([g[0] - g[1], g[-1] - g[-2], g[:, 0] - g[:, 1], g[:, -1] - g[:, -2]])
-    all_pts, all_strength, tree = cand.frame_saddles if cand.frame_saddles is not None else (pts, strength, cKDTree(pts))
+    frame = cand.frame_saddles
+    _, all_strength, tree = frame if frame is not None else (pts, strength, cKDTree(pts))
     dist, near = tree.query(outside, distance_upper_bound=float(np.linalg.norm(step, axis=1).max()))
     hit = dist < LATTICE_REACH * np.linalg.norm(step, axis=1)
     ring = np.where(hit, all_strength[np.minimum(near, len(all_strength) - 1)], 0.0)
