@@ -11,8 +11,12 @@ with an alpha slider follows. COMMIT sends the calibration to the robot over ROS
 (``set_camera_info``) or writes ``camera_intrinsic/<ROBOT>.yaml`` into a calibration folder;
 SAVE writes the samples and the YAML into one zip that :meth:`LiveCalibrator.load` reads back.
 
-All state lives in one :class:`LiveCalibrator` object; every button has a method of the same
-name, so the tool can be driven from Python (tests, scripts) as well as by clicks.
+The calibration itself happens in a :class:`dtscal_lib.session.IntrinsicSession`, the same one
+``dtscal calibrate-intrinsics`` drives: COMMIT goes through its gate, so the live tool refuses what
+the command line refuses (nothing written; "keep anyway" writes ``ROBOT.rejected.yaml`` beside, and
+never sends it to the robot). :class:`LiveCalibrator` holds the widgets and the threads; every
+button has a method of the same name, so the tool can be driven from Python (tests, scripts) as
+well as by clicks.
 
 Examples
 --------
@@ -22,7 +26,6 @@ Examples
 
 from __future__ import annotations
 
-import html
 import threading
 import time
 from collections import Counter
@@ -35,43 +38,20 @@ from .. import calib_files
 from ..boards import DUCKIETOWN_BOARD, Board
 from ..camera import CameraModel
 from ..coverage import CoverageTracker
-from ..detect import detect_board, draw_detection
-from ..errors import DtscalError
-from ..pipeline import MIN_SAMPLES, calibrate_without_outlier_views, robot_from_topic
+from ..detect import draw_detection
+from ..errors import DtscalError, ImplausibleCalibrationError, Reason
+from ..session import MIN_SAMPLES, IntrinsicSession, assess_quality, robot_name
+from ..sources.live import open_live
 from . import render
 from .archive import load_session, save_session
-from ..sources.live import open_live
 from .frameloop import DisplayPacer, FrameLoop, ack_widgets
-from .solver import SolverProcess, assess_quality
+from .render import rectification_maps_fast, verdict_html  # noqa: F401  (their home was here)
+from .solver import SolverProcess
 
 
 def robot_of(spec: str, source=None) -> str | None:
-    """The robot a source belongs to: ``ros:NAME`` -> NAME; a bag's camera topic -> its robot."""
-    spec = str(spec)
-    if spec.startswith("ros:"):
-        return spec[4:].strip("/") or None
-    name = getattr(source, "robot", None) or robot_from_topic(getattr(source, "topic", None))
-    if name is None and spec.endswith(".bag"):
-        try:
-            from ..sources import open_source
-
-            name = robot_from_topic(open_source(spec).topic)
-        except DtscalError:
-            name = None
-    return name
-
-
-def verdict_html(quality) -> str | None:
-    """The verdict part of the results panel from :func:`~dtscal_lib.ui.solver.assess_quality`."""
-    if quality is None:
-        return None
-    if isinstance(quality, str):
-        return render.message_html(quality)
-    findings = "".join(f"<li>{html.escape(str(f.message))} <i>{html.escape(str(f.advice))}</i></li>"
-                       for f in getattr(quality, "findings", []))
-    colour = {"good": render.GREEN, "bad": render.RED}.get(str(quality.verdict), "#b7791f")
-    return (f'<span class="dtscal-verdict" style="color:{colour}"><b>{html.escape(str(quality.verdict))}</b></span>'
-            + (f"<ul>{findings}</ul>" if findings else ""))
+    """The robot a source belongs to (:func:`dtscal_lib.session.robot_name`, the kit's one rule)."""
+    return robot_name(spec, source)
 
 
 class LiveCalibrator:
@@ -99,12 +79,11 @@ class LiveCalibrator:
         self.model = model
         self.spec = str(getattr(source, "spec", source))
         self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
-        self.robot = robot or robot_of(self.spec, self.source) or "camera"
-        self.tracker: CoverageTracker | None = None
+        #: where the calibration happens (the same session the command line drives)
+        self.session = IntrinsicSession(board, model=model, first_size_wins=True, source=self.spec,
+                                        robot=robot_name(self.spec, self.source, robot) or "camera")
         self.thumbs: list[bytes] = []
-        self.result = None
         self.quality = None
-        self.dropped: list[int] = []
         self.bad: Counter = Counter()
         self.frames_seen = 0
         self.last_frame = None
@@ -112,7 +91,7 @@ class LiveCalibrator:
         self.calibrating = False
         self.calibrate_error: str | None = None
         self.calibrate_seconds = float("nan")
-        self._lock = threading.RLock()
+        self._lock = self.session.lock
         self._job: threading.Thread | None = None
         self._preview_maps = None
         self._preview_key = None
@@ -130,6 +109,9 @@ class LiveCalibrator:
         self.calibrate_button = w.Button(description="CALIBRATE", disabled=True, button_style="primary",
                                          tooltip="enabled when every bar is green or at 40 samples")
         self.commit_button = w.Button(description="COMMIT", disabled=True, button_style="success")
+        self.keep_anyway = w.Checkbox(value=False, description="keep anyway (expert)", indent=False,
+                                      tooltip="COMMIT a calibration the kit refuses as ROBOT.rejected.yaml beside "
+                                              "the robot's file (never sent to the robot)")
         self.save_button = w.Button(description="SAVE", disabled=False)
         self.reconnect_button = w.Button(description="RECONNECT", icon="refresh")
         ros = self.spec.startswith("ros:")
@@ -154,7 +136,8 @@ class LiveCalibrator:
             self.status, self.image,
             w.HBox([w.VBox([self.bars, self.count], layout=lay(width="330px")),
                     w.VBox([w.HBox([self.calibrate_button, self.commit_button, self.save_button,
-                                    self.reconnect_button]), self.commit_target, self.robot_text])]),
+                                    self.reconnect_button]), self.commit_target, self.robot_text,
+                                    self.keep_anyway])]),
             w.HTML("<b>samples kept</b> (click a sample's button to drop it)"), self.thumb_box,
             self.folder_text, self.archive_text, self.message,
             w.HTML("<b>results</b>"), self.results,
@@ -176,6 +159,31 @@ class LiveCalibrator:
         bundle["text/plain"] = "live calibrator (shown as a widget in JupyterLab)"
         return bundle
 
+    # ------------------------------------------------------------------ the session's state
+    @property
+    def robot(self) -> str:
+        return self.session.robot
+
+    @robot.setter
+    def robot(self, name: str) -> None:
+        self.session.robot = name
+
+    @property
+    def tracker(self) -> CoverageTracker | None:
+        return self.session.tracker
+
+    @tracker.setter
+    def tracker(self, tracker: CoverageTracker | None) -> None:
+        self.session.tracker = tracker
+
+    @property
+    def result(self):
+        return self.session.result
+
+    @property
+    def dropped(self) -> list[int]:
+        return self.session.dropped
+
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
         self.state = st.state
@@ -187,17 +195,13 @@ class LiveCalibrator:
         img = frame.image
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
             return self._skip("odd_frame")
-        size = (img.shape[1], img.shape[0])
+        offer = self.session.offer(frame)
+        if offer.reason == Reason.SIZE_MISMATCH:
+            return self._skip("size_mismatch")
+        if offer.detection is None:  # the detector could not take the frame
+            return self._skip("detector_error")
+        det, added = offer.detection, offer.added
         with self._lock:
-            if self.tracker is None:
-                self.tracker = CoverageTracker(self.board, size)
-            if size != self.tracker.image_size:
-                return self._skip("size_mismatch")
-            try:
-                det = detect_board(img, self.board)
-            except (DtscalError, cv2.error):
-                return self._skip("detector_error")
-            added = self.tracker.offer(det, frame.index) if det.found else False
             if added:
                 self.thumbs.append(render.thumbnail(img, det.corners))
             n = len(self.tracker.samples)
@@ -307,13 +311,11 @@ class LiveCalibrator:
             if self.calibrating:
                 job = self._job
             else:
-                obj, img = self.tracker.object_and_image_points() if self.tracker else ([], [])
-                size = self.tracker.image_size if self.tracker else None
+                n = len(self.samples)
                 self.calibrating = True
                 self.calibrate_button.disabled = True
-                self.results.value = render.message_html(f"calibrating from {len(obj)} samples ...")
-                job = threading.Thread(target=self._calibrate_job, args=(obj, img, size), daemon=True,
-                                       name="dtscal-calibrate")
+                self.results.value = render.message_html(f"calibrating from {n} samples ...")
+                job = threading.Thread(target=self._calibrate_job, daemon=True, name="dtscal-calibrate")
                 self._job = job
                 job.start()
         if wait:
@@ -334,15 +336,6 @@ class LiveCalibrator:
                 return False
         return self._solver.ready(wait)
 
-    def _solve(self, obj, img, size):
-        """``calibrate_without_outlier_views`` in the calibration process (in this one if that fails)."""
-        if self.prepare_calibration():
-            try:
-                return self._solver.calibrate(obj, img, size, self.model)
-            except (OSError, EOFError):
-                self._solver = None
-        return calibrate_without_outlier_views(obj, img, size, model=self.model)
-
     def _assess(self, result):
         """The verdict (after the result is shown: it can take longer than the calibration)."""
         if getattr(result, "quality", None) is None:
@@ -354,15 +347,17 @@ class LiveCalibrator:
                 pass
         return assess_quality(result)
 
-    def _calibrate_job(self, obj, img, size) -> None:
+    def _calibrate_job(self) -> None:
+        """CALIBRATE: the session calibrates (in the calibration process when it runs, else here)."""
         t0 = time.perf_counter()
+        n = len(self.samples)
         try:
-            if len(obj) < MIN_SAMPLES:
-                raise DtscalError(f"only {len(obj)} sample(s); calibration needs at least {MIN_SAMPLES} views "
-                                  "of the board at different positions and tilts")
-            result, dropped = self._solve(obj, img, size)
-            if not np.all(np.isfinite(result.K)):
-                raise DtscalError("the calibration did not converge; collect more varied samples")
+            try:
+                solver = self._solver if self.prepare_calibration() else None
+                result = self.session.calibrate(solver=solver)
+            except (OSError, EOFError):  # the calibration process is gone: calibrate in this one
+                self._solver = None
+                result = self.session.calibrate()
         except DtscalError as exc:
             self.calibrate_error = str(exc)
             keep = " The previous calibration is kept." if self.result is not None else ""
@@ -373,11 +368,12 @@ class LiveCalibrator:
                 f"CALIBRATE failed ({self.calibrate_error}); collect more varied samples and try again", "error")
         else:
             self.calibrate_error = None
+            dropped = self.session.dropped
             with self._lock:
-                self.result, self.dropped, self.quality = result, dropped, None
+                self.quality = None
             # the preview's maps are made here, in the calibration's thread: the frame loop never builds them
             self._build_preview_maps(result, float(self.alpha.value))
-            self.results.value = render.calibration_html(result, dropped, len(obj))
+            self.results.value = render.calibration_html(result, dropped, n)
             self.commit_button.disabled = False
         finally:
             self.calibrate_seconds = time.perf_counter() - t0
@@ -388,9 +384,9 @@ class LiveCalibrator:
                 with self._lock:
                     current = self.result is result
                     if current:
-                        self.quality = quality
+                        self.quality = self.session.quality(known=quality)
                 if verdict and current:
-                    self.results.value = render.calibration_html(result, dropped, len(obj), verdict)
+                    self.results.value = render.calibration_html(result, dropped, n, verdict)
         finally:
             with self._lock:
                 self.calibrating = False
@@ -403,10 +399,8 @@ class LiveCalibrator:
         return None if self.result is None else self.result.camera()
 
     def calibration(self) -> calib_files.IntrinsicCalibration | None:
-        cam = self.camera()
-        if cam is None:
-            return None
-        return calib_files.IntrinsicCalibration.from_camera(cam, camera_name=f"/{self.robot}/camera_node")
+        """The content of ``camera_intrinsic/<ROBOT>.yaml`` (None before CALIBRATE)."""
+        return self.session.calibration()
 
     def _say(self, text: str, kind: str = "info") -> str:
         self.message.value = render.message_html(text, kind)
@@ -416,21 +410,30 @@ class LiveCalibrator:
         """Write ``camera_intrinsic/<ROBOT>.yaml`` into the calibration folder and, with the
         target "robot over ROS", send it to ``/<ROBOT>/camera_node/set_camera_info``.
 
-        On failure the message says why; the previous file on the robot or in the folder
-        is unchanged, and SAVE still keeps the new calibration.
+        The session's gate comes first, as for ``dtscal calibrate-intrinsics``: a calibration the kit
+        does not believe is refused (nothing written, nothing sent); with "keep anyway" it is written as
+        ``<ROBOT>.rejected.yaml`` beside the robot's file and never sent. On failure the message says
+        why; the previous file on the robot or in the folder is unchanged, and SAVE still keeps the new
+        calibration.
         """
-        calib = self.calibration()
-        if calib is None:
+        if self.result is None:
             return self._say("nothing to commit yet: CALIBRATE first", "error")
+        keep = bool(self.keep_anyway.value)
         try:
-            robot = calib_files.check_robot_name(self.robot)
-            path = calib_files.save_intrinsics(calib, self.folder_text.value.strip(), robot)
+            path = self.session.write(self.folder_text.value.strip(), keep_anyway=keep)
+            if self.session.doubts:
+                return self._say(f"COMMIT: kept as {path} beside the robot's file, against the kit's doubts: "
+                                 + "; ".join(self.session.doubts) + ". It is not sent to the robot.", "error")
             if self.commit_target.value == "folder":
                 return self._say(f"COMMIT: wrote {path} (the previous file, if any, is kept as .bak)", "ok")
-            from ..robot import commit_intrinsics
-
-            answer = commit_intrinsics(robot, path, master_uri=getattr(self.source, "master", None))
-            return self._say(f"COMMIT to {robot}: {answer} (local copy: {path})", "ok")
+            answer = self.session.commit(master_uri=getattr(self.source, "master", None))
+            return self._say(f"COMMIT to {self.robot}: {answer} (local copy: {path})", "ok")
+        except ImplausibleCalibrationError as exc:
+            doubts = "".join(f"<br>- {d}" for d in exc.doubts)
+            return self._say(f"COMMIT refused: the kit does not believe this calibration, nothing was written "
+                             f"and nothing sent:{doubts}<br>Collect more varied samples and CALIBRATE again, or, as "
+                             f"an expert, tick \"keep anyway\" to keep it as {self.robot}"
+                             f"{calib_files.REJECTED_SUFFIX}.yaml beside the robot's file.", "error")
         except (DtscalError, OSError) as exc:
             return self._say(f"COMMIT failed: {exc}. The previous calibration is unchanged; "
                              "SAVE still keeps this one.", "error")
@@ -463,7 +466,7 @@ class LiveCalibrator:
             if self.tracker is None or self.tracker.image_size != arch.image_size:
                 self.tracker = CoverageTracker(self.board, arch.image_size)
             self.tracker.samples = list(arch.samples)
-            self.thumbs = [_outline_thumb(s.corners, arch.image_size) for s in arch.samples]
+            self.thumbs = [render.outline_thumb(s.corners, arch.image_size) for s in arch.samples]
             bars, n, ready = self.tracker.bars(), len(arch.samples), self.tracker.ready()
         self.bars.value = render.bars_html(bars)
         self.count.value = f"samples: {n}"
@@ -491,22 +494,3 @@ class LiveCalibrator:
 
     def __exit__(self, *exc):
         self.close()
-
-
-def rectification_maps_fast(cam: CameraModel):
-    """``cam.rectification_maps()`` for the live views, computed by ``cv2.initUndistortRectifyMap``.
-
-    The kit's own :func:`~dtscal_lib.camera.rectification_maps` (numpy) takes ~0.1 s of CPU at
-    640x480 and holds the interpreter meanwhile; OpenCV's gives the same maps (to float32
-    resolution, checked in the tests) in a few milliseconds without holding it. OpenCV ignores
-    the skew of K, so a camera with skew keeps the kit's maps.
-    """
-    if cam.K[0, 1] != 0.0:
-        return cam.rectification_maps()
-    return cv2.initUndistortRectifyMap(cam.K, cam.dist, None, cam.rectified_K, cam.size, cv2.CV_32FC1)
-
-
-def _outline_thumb(corners: np.ndarray, size, width: int = 96) -> bytes:
-    """Thumbnail of a loaded sample (the frame is not saved): the board outline on grey."""
-    blank = np.full((size[1], size[0], 3), 200, np.uint8)
-    return render.thumbnail(blank, corners, width)
