@@ -20,8 +20,8 @@ from .boards import DUCKIETOWN_BOARD, Board
 from .calibration import CalibrationResult
 from .errors import DtscalError, Reason
 from .session import (MAX_OUTLIER_SHARE, MIN_SAMPLES, OUTLIER_FACTOR, ExtrinsicSession,  # noqa: F401
-                      FrameTally, IntrinsicSession, SizeGroups, _robot_for_files, calibrate_without_outlier_views,
-                      robot_from_topic, robot_name)
+                      FrameTally, IntrinsicSession, SizeGroups, calibrate_without_outlier_views, robot_from_topic,
+                      robot_name)
 from .sources import Frame, open_source
 from .sources.headers import MAX_PIXELS, MAX_SIDE
 from .validation import check_board, check_image_size, check_output_folder
@@ -68,8 +68,15 @@ def parse_image_size(text: str | None) -> tuple[int, int] | None:
 
 def _robot(robot: str | None, src, writing: bool) -> str:
     """The robot of the run (:func:`~dtscal_lib.session.robot_name`); checked up front when a file is written."""
+    from .calib_files import check_robot_name
+
     name = robot_name(getattr(src, "spec", None), src, robot)
-    return _robot_for_files(name) if writing else (name or "camera")
+    if not writing:
+        return name or "camera"
+    if not name:
+        raise DtscalError("cannot tell which robot this is from the source; pass --robot NAME "
+                          "(the calibration is written as camera_intrinsic/NAME.yaml)")
+    return check_robot_name(name)
 
 
 @dataclass
@@ -146,8 +153,7 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         session.offer(frame)
     session.skipped(getattr(src, "bad", {}))  # corrupt frames a live source skipped
     result = session.calibrate()
-    tracker = session.tracker
-    run = IntrinsicRun(result, session.robot, session.tally(), result.n_views, tracker.bars(), session.source,
+    run = IntrinsicRun(result, session.robot, session.tally(), result.n_views, session.bars(), session.source,
                        session=session)
     run.path = session.write(out_dir, keep_anyway)
     run.doubts = session.doubts

@@ -101,14 +101,6 @@ def intrinsic_file(camera: CameraModel, robot: str) -> calib_files.IntrinsicCali
     return calib_files.IntrinsicCalibration.from_camera(camera, camera_name=camera_name(robot))
 
 
-def _robot_for_files(robot: str | None) -> str:
-    """The robot whose file is written, checked before any work is done."""
-    if robot:
-        return calib_files.check_robot_name(robot)
-    raise DtscalError("cannot tell which robot this is from the source; pass --robot NAME "
-                      "(the calibration is written as camera_intrinsic/NAME.yaml)")
-
-
 # --------------------------------------------------------------------------- findings
 def as_findings(items, kind: str = "intrinsic") -> list[Finding]:
     """Refusals as :class:`~dtscal_lib.quality.Finding` s, whether the judge gave strings or Findings.
@@ -286,8 +278,10 @@ def assess_quality(result):
 
     The verdict is extra information: a failing assessment must never lose the calibration.
     """
+    from .quality import assess
+
     try:
-        return result.quality()
+        return assess(result)
     except Exception as exc:  # the verdict is extra information: it must never lose the calibration
         return f"no verdict ({type(exc).__name__}: {exc})"
 
@@ -319,9 +313,12 @@ class IntrinsicSession:
         self.lock = threading.RLock()
         self._frames = FrameTally()  # frames that are no image, and those a source skipped
         self.result: CalibrationResult | None = None
+        #: the calibrated camera (``P`` with alpha 0, as ROS sets it), None before CALIBRATE
+        self.camera: CameraModel | None = None
         self.dropped: list[int] = []
         self.path: Path | None = None
         self._kept_points: list = []
+        self._bars: list = []
         self._quality = None
         self._refusals: list[Finding] | None = None
 
@@ -420,6 +417,14 @@ class IntrinsicSession:
                 obj, img = list(group.obj), list(group.img)
             return obj, img, size
 
+    def _bars_now(self) -> list:
+        tracker = self.tracker
+        return [] if tracker is None else tracker.bars()
+
+    def bars(self) -> list:
+        """The coverage bars (X, Y, Size, Skew): of the views the last calibration used, else as they are now."""
+        return self._bars if self.result is not None else self._bars_now()
+
     @property
     def samples(self) -> int:
         """Views kept by the last calibration (outliers dropped)."""
@@ -433,6 +438,7 @@ class IntrinsicSession:
         helper process): an object with ``calibrate(obj, img, size, model) -> (result, dropped)``.
         """
         obj, img, size = self.views()
+        bars = self._bars_now()
         tally = self.tally()
         if size is None or (self.groups.image_size is not None and size not in self.groups.groups):
             if self.groups.groups and self.groups.image_size is not None:
@@ -454,8 +460,9 @@ class IntrinsicSession:
         if not np.all(np.isfinite(result.K)):
             raise CalibrationError("the calibration did not converge; collect more varied samples")
         gone = set(dropped)
+        camera = result.camera()
         with self.lock:
-            self.result, self.dropped = result, list(dropped)
+            self.result, self.camera, self.dropped, self._bars = result, camera, list(dropped), bars
             self._kept_points = [p for i, p in enumerate(img) if i not in gone]
             self._quality, self._refusals, self.path = None, None, None
         return result
@@ -511,7 +518,7 @@ class IntrinsicSession:
         """The content of the robot's intrinsic file (None before CALIBRATE)."""
         if self.result is None:
             return None
-        return intrinsic_file(self.result.camera(), self.robot or "camera")
+        return intrinsic_file(self.camera, self.robot or "camera")
 
     def write(self, out, keep_anyway: bool = False, fmt: str = "classic") -> Path | None:
         """Write ``out/camera_intrinsic/ROBOT.yaml`` (previous one kept as ``.bak``), the kit's gate first.
@@ -524,8 +531,8 @@ class IntrinsicSession:
             raise DtscalError(f"intrinsic files have one format (classic), not {fmt!r}")
         if self.result is None:
             raise DtscalError("nothing to write yet: CALIBRATE first")
+        refusals = self.refusals()  # judged first: the gate before any file
         robot = calib_files.check_robot_name(self.robot) if out is not None else (self.robot or "camera")
-        refusals = self.refusals()
         if refusals and not keep_anyway:
             raise _refusal(refusals, self.kind, robot)
         if out is None:
@@ -542,8 +549,8 @@ class IntrinsicSession:
 
         if self.result is None:
             raise DtscalError("nothing to commit yet: CALIBRATE first")
-        robot = calib_files.check_robot_name(self.robot)
         refusals = self.refusals()
+        robot = calib_files.check_robot_name(self.robot)
         if refusals:
             raise _refusal(refusals, self.kind, robot)
         path = self.path or calib_files.save_intrinsics(self.calibration(), tempfile.mkdtemp(prefix="dtscal-commit-"),
@@ -673,8 +680,8 @@ class ExtrinsicSession:
         ``ROBOT.rejected.yaml`` beside the robot's file, in the format asked for.
         """
         res = self.calibrate()
+        refusals = self.refusals()  # judged first: the gate before any file
         robot = calib_files.check_robot_name(self.robot) if out is not None else (self.robot or "camera")
-        refusals = self.refusals()
         if refusals and not keep_anyway:
             raise _refusal(refusals, self.kind, robot)
         if out is None:
@@ -693,8 +700,8 @@ class ExtrinsicSession:
         from . import robot as robot_link
 
         res = self.calibrate()
-        robot = calib_files.check_robot_name(self.robot)
         refusals = self.refusals()
+        robot = calib_files.check_robot_name(self.robot)
         if refusals:
             raise _refusal(refusals, self.kind, robot)
         path = self.path or calib_files.save_extrinsics_as(

@@ -396,7 +396,7 @@ class LiveCalibrator:
 
     def camera(self) -> CameraModel | None:
         """The calibrated camera (``P`` with alpha 0, as ROS sets it), or None before CALIBRATE."""
-        return None if self.result is None else self.result.camera()
+        return self.session.camera
 
     def calibration(self) -> calib_files.IntrinsicCalibration | None:
         """The content of ``camera_intrinsic/<ROBOT>.yaml`` (None before CALIBRATE)."""
