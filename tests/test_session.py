@@ -152,7 +152,8 @@ def test_one_robot_name_rule():
 
 # --------------------------------------------------------------------------- the walk
 #: the layers of a calibration's walk: drivers call the session, the session calls the areas below
-DRIVERS = {"cli", "pipeline", "ui.intrinsic", "ui.extrinsic", "ui.frameloop", "ui.render", "ui.archive"}
+DRIVERS = {"cli", "pipeline", "ui.intrinsic", "ui.extrinsic", "ui.background", "ui.frameloop", "ui.render",
+           "ui.archive"}
 AREAS = {"detect": {"detect", "coverage", "boards"}, "calibration": {"calibration", "camera", "ui.solver"},
          "judge": {"plausibility", "quality", "ground", "report"}, "files": {"calib_files", "safe_yaml"},
          "robot": {"robot"}}
@@ -268,7 +269,6 @@ def test_the_walk_visits_each_module_once_and_the_live_tool_walks_the_same_sessi
     app = LiveCalibrator(str(short_bag), autostart=False, calibration_dir=tmp_path / "live")
     try:
         frames = [f for f in open_source(short_bag) if f.ok]
-        app._solver = None
         app.prepare_calibration = lambda wait=0.0: False  # CALIBRATE in this process, where it is traced
         with Walk() as live_walk:
             for f in frames:

@@ -26,12 +26,10 @@ Examples
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import Counter
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from .. import calib_files
@@ -40,13 +38,13 @@ from ..camera import CameraModel
 from ..coverage import CoverageTracker
 from ..detect import draw_detection
 from ..errors import DtscalError, ImplausibleCalibrationError, Reason
-from ..session import MIN_SAMPLES, IntrinsicSession, assess_quality, robot_name
+from ..session import MIN_SAMPLES, IntrinsicSession, robot_name
 from ..sources.live import open_live
 from . import render
 from .archive import load_session, save_session
 from .frameloop import DisplayPacer, FrameLoop, ack_widgets
 from .render import rectification_maps_fast, verdict_html  # noqa: F401  (their home was here)
-from .solver import SolverProcess
+from .background import BackgroundCalibration, PreviewMaps
 
 
 def robot_of(spec: str, source=None) -> str | None:
@@ -84,20 +82,17 @@ class LiveCalibrator:
                                         robot=robot_name(self.spec, self.source, robot) or "camera")
         self.thumbs: list[bytes] = []
         self.quality = None
+        self._calibrating_from = 0
         self.bad: Counter = Counter()
         self.frames_seen = 0
         self.last_frame = None
         self.state = "connecting"
-        self.calibrating = False
-        self.calibrate_error: str | None = None
-        self.calibrate_seconds = float("nan")
         self._lock = self.session.lock
-        self._job: threading.Thread | None = None
-        self._preview_maps = None
-        self._preview_key = None
-        self._preview_builder: threading.Thread | None = None
-        # CALIBRATE runs in a helper process (see solver.py: in a thread, it would stall the image)
-        self._solver: SolverProcess | None = None
+        # CALIBRATE runs off the frame loop, its solver in a helper process (solver.py: in a thread, it would
+        # stall the image); the preview's maps are made in a helper thread
+        self.background = BackgroundCalibration(self.session, on_result=self._calibrated, on_error=self._failed,
+                                                on_verdict=self._verdict, on_end=self._calibrate_ended)
+        self._preview = PreviewMaps(self._lock)
 
         # ---- widgets
         lay = w.Layout
@@ -159,30 +154,18 @@ class LiveCalibrator:
         bundle["text/plain"] = "live calibrator (shown as a widget in JupyterLab)"
         return bundle
 
-    # ------------------------------------------------------------------ the session's state
-    @property
-    def robot(self) -> str:
-        return self.session.robot
-
-    @robot.setter
-    def robot(self, name: str) -> None:
-        self.session.robot = name
-
-    @property
-    def tracker(self) -> CoverageTracker | None:
-        return self.session.tracker
-
-    @tracker.setter
-    def tracker(self, tracker: CoverageTracker | None) -> None:
-        self.session.tracker = tracker
-
-    @property
-    def result(self):
-        return self.session.result
-
-    @property
-    def dropped(self) -> list[int]:
-        return self.session.dropped
+    # ------------------------------------------------------------------ state: the session's and the background's
+    robot = property(lambda self: self.session.robot, lambda self, name: setattr(self.session, "robot", name))
+    tracker = property(lambda self: self.session.tracker, lambda self, t: setattr(self.session, "tracker", t),
+                       doc="the coverage (samples, bars) of the session")
+    result = property(lambda self: self.session.result, doc="the CalibrationResult, None before CALIBRATE")
+    dropped = property(lambda self: self.session.dropped, doc="views dropped as outliers by the last CALIBRATE")
+    calibrating = property(lambda self: self.background.busy)
+    calibrate_error = property(lambda self: self.background.error)
+    calibrate_seconds = property(lambda self: self.background.seconds)
+    _solver = property(lambda self: self.background.solver)
+    _preview_key = property(lambda self: self._preview.key)
+    _preview_maps = property(lambda self: self._preview.maps)
 
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
@@ -218,7 +201,7 @@ class LiveCalibrator:
             self.bars.value = render.bars_html(bars)
             self.count.value = f"samples: {n}"
             self._add_thumb(n - 1)
-        enable = ready and not self.calibrating and n >= MIN_SAMPLES
+        enable = ready and not self.background.busy and n >= MIN_SAMPLES
         if self.calibrate_button.disabled == enable:
             self.calibrate_button.disabled = not enable
 
@@ -230,8 +213,9 @@ class LiveCalibrator:
         with self.image.hold_sync():
             self.image.value = jpeg
             self.image._dom_classes = render.stamp_classes(index, arrival, token, "intrinsic")
-        if self.result is not None:
-            self._show_preview(img)
+        out = self._preview.undistort(img, self.result, float(self.alpha.value), lambda: self.result)
+        if out is not None:
+            self.preview.value = render.encode_jpeg(out)
 
     def _skip(self, reason: str) -> bool:
         """Count a frame the calibrator cannot use (the count shows under the bars); returns False."""
@@ -259,30 +243,6 @@ class LiveCalibrator:
         for i in range(len(self.thumbs)):
             self._add_thumb(i)
 
-    def _build_preview_maps(self, result, alpha: float) -> None:
-        """Undistortion maps of ``result`` at ``alpha`` for the preview (kept if ``result`` is still current)."""
-        maps = rectification_maps_fast(result.camera().with_alpha(alpha))
-        with self._lock:
-            if self.result is result:
-                self._preview_maps, self._preview_key = maps, (id(result), round(alpha, 3))
-
-    def _show_preview(self, img) -> None:
-        """The undistorted preview of a frame (loop thread). New maps (another alpha) are built in a
-        helper thread meanwhile, never here: a frame never waits for them."""
-        alpha = float(self.alpha.value)
-        with self._lock:
-            result, maps, key = self.result, self._preview_maps, self._preview_key
-        if result is None:
-            return
-        if key != (id(result), round(alpha, 3)) and not (self._preview_builder and self._preview_builder.is_alive()):
-            self._preview_builder = threading.Thread(target=self._build_preview_maps, args=(result, alpha),
-                                                     daemon=True, name="dtscal-preview-maps")
-            self._preview_builder.start()
-        if maps is None or key[0] != id(result):
-            return
-        out = cv2.remap(img, maps[0], maps[1], cv2.INTER_LINEAR)
-        self.preview.value = render.encode_jpeg(out)
-
     # ------------------------------------------------------------------ actions
     @property
     def samples(self):
@@ -295,11 +255,11 @@ class LiveCalibrator:
                 return
             del self.tracker.samples[i]
             del self.thumbs[i]
-            bars, n, ready = self.tracker.bars(), len(self.tracker.samples), self.tracker.ready()
+            bars, n = self.tracker.bars(), len(self.tracker.samples)
         self.bars.value = render.bars_html(bars)
         self.count.value = f"samples: {n}"
         self._rebuild_thumbs()
-        self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES) or self.calibrating
+        self.calibrate_button.disabled = not self.background.can_start()
 
     def calibrate(self, wait: bool = False):
         """Calibrate from the samples in a background thread; ``wait=True`` blocks until done.
@@ -308,91 +268,42 @@ class LiveCalibrator:
         degenerate samples) is shown in the results panel; the previous calibration stays.
         """
         with self._lock:
-            if self.calibrating:
-                job = self._job
-            else:
-                n = len(self.samples)
-                self.calibrating = True
+            if not self.background.busy:
                 self.calibrate_button.disabled = True
-                self.results.value = render.message_html(f"calibrating from {n} samples ...")
-                job = threading.Thread(target=self._calibrate_job, daemon=True, name="dtscal-calibrate")
-                self._job = job
-                job.start()
+                self._calibrating_from = len(self.samples)
+                self.results.value = render.message_html(f"calibrating from {self._calibrating_from} samples ...")
+            job = self.background.start(self.prepare_calibration)
         if wait:
             job.join()
             return self.result
         return job
 
     def prepare_calibration(self, wait: float = 0.0) -> bool:
-        """Start the calibration process ahead of CALIBRATE (done by itself at 3 samples).
+        """Start the calibration process ahead of CALIBRATE (done by itself at 3 samples); True when ready."""
+        return self.background.prepare(wait)
 
-        Returns True when it is ready (waiting up to ``wait`` seconds).
-        """
-        if self._solver is None or not self._solver.alive:
-            try:
-                self._solver = SolverProcess()
-            except OSError:  # no subprocesses here: CALIBRATE runs in a thread of this process
-                self._solver = None
-                return False
-        return self._solver.ready(wait)
+    def _calibrated(self, result) -> None:
+        with self._lock:
+            self.quality = None
+        # the preview's maps are made here, in the calibration's thread: the frame loop never builds them
+        self._preview.build(result, float(self.alpha.value), lambda: self.result)
+        self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from)
+        self.commit_button.disabled = False
 
-    def _assess(self, result):
-        """The verdict (after the result is shown: it can take longer than the calibration)."""
-        if getattr(result, "quality", None) is None:
-            return None
-        if self._solver is not None:
-            try:
-                return self._solver.assess(result)
-            except (OSError, EOFError, DtscalError):
-                pass
-        return assess_quality(result)
+    def _failed(self, message: str) -> None:
+        keep = " The previous calibration is kept." if self.result is not None else ""
+        self.results.value = render.message_html(message + keep, "error")
 
-    def _calibrate_job(self) -> None:
-        """CALIBRATE: the session calibrates (in the calibration process when it runs, else here)."""
-        t0 = time.perf_counter()
-        n = len(self.samples)
-        try:
-            try:
-                solver = self._solver if self.prepare_calibration() else None
-                result = self.session.calibrate(solver=solver)
-            except (OSError, EOFError):  # the calibration process is gone: calibrate in this one
-                self._solver = None
-                result = self.session.calibrate()
-        except DtscalError as exc:
-            self.calibrate_error = str(exc)
-            keep = " The previous calibration is kept." if self.result is not None else ""
-            self.results.value = render.message_html(f"CALIBRATE failed: {exc}.{keep}", "error")
-        except Exception as exc:  # numerical breakdown: a message, never a traceback
-            self.calibrate_error = f"{type(exc).__name__}: {exc}"
-            self.results.value = render.message_html(
-                f"CALIBRATE failed ({self.calibrate_error}); collect more varied samples and try again", "error")
-        else:
-            self.calibrate_error = None
-            dropped = self.session.dropped
-            with self._lock:
-                self.quality = None
-            # the preview's maps are made here, in the calibration's thread: the frame loop never builds them
-            self._build_preview_maps(result, float(self.alpha.value))
-            self.results.value = render.calibration_html(result, dropped, n)
-            self.commit_button.disabled = False
-        finally:
-            self.calibrate_seconds = time.perf_counter() - t0
-        try:
-            if self.calibrate_error is None:  # the verdict follows; it can take longer than the calibration
-                quality = self._assess(result)
-                verdict = verdict_html(quality)
-                with self._lock:
-                    current = self.result is result
-                    if current:
-                        self.quality = self.session.quality(known=quality)
-                if verdict and current:
-                    self.results.value = render.calibration_html(result, dropped, n, verdict)
-        finally:
-            with self._lock:
-                self.calibrating = False
-                ready = self.tracker is not None and self.tracker.ready()
-                n = len(self.tracker.samples) if self.tracker else 0
-            self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES)
+    def _verdict(self, result, quality) -> None:
+        """The verdict follows the result (it can take longer than the calibration)."""
+        with self._lock:
+            self.quality = quality
+        verdict = verdict_html(quality)
+        if verdict:
+            self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from, verdict)
+
+    def _calibrate_ended(self) -> None:
+        self.calibrate_button.disabled = not self.background.can_start()
 
     def camera(self) -> CameraModel | None:
         """The calibrated camera (``P`` with alpha 0, as ROS sets it), or None before CALIBRATE."""
@@ -467,11 +378,11 @@ class LiveCalibrator:
                 self.tracker = CoverageTracker(self.board, arch.image_size)
             self.tracker.samples = list(arch.samples)
             self.thumbs = [render.outline_thumb(s.corners, arch.image_size) for s in arch.samples]
-            bars, n, ready = self.tracker.bars(), len(arch.samples), self.tracker.ready()
+            bars, n = self.tracker.bars(), len(arch.samples)
         self.bars.value = render.bars_html(bars)
         self.count.value = f"samples: {n}"
         self._rebuild_thumbs()
-        self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES)
+        self.calibrate_button.disabled = not self.background.can_start()
         return self._say(f"loaded {n} samples from {path}; CALIBRATE to recalibrate", "ok")
 
     def reconnect(self) -> str:
@@ -485,9 +396,7 @@ class LiveCalibrator:
     def close(self) -> None:
         """Stop the frame loop, close the source and end the calibration process."""
         self.loop.close()
-        if self._solver is not None:
-            self._solver.close()
-            self._solver = None
+        self.background.close()
 
     def __enter__(self):
         return self
