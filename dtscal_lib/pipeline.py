@@ -18,34 +18,13 @@ import numpy as np
 
 from .boards import DUCKIETOWN_BOARD, Board
 from .calibration import CalibrationResult
-from .errors import DtscalError, Reason
+from .errors import DtscalError
 from .session import (MAX_OUTLIER_SHARE, MIN_SAMPLES, OUTLIER_FACTOR, ExtrinsicSession,  # noqa: F401
                       FrameTally, IntrinsicSession, SizeGroups, calibrate_without_outlier_views, robot_from_topic,
                       robot_name)
-from .sources import Frame, open_source
+from .sources import open_source
 from .sources.headers import MAX_PIXELS, MAX_SIDE
 from .validation import check_board, check_image_size, check_output_folder
-
-
-def usable_images(frames: Iterable[Frame], tally: FrameTally, size: tuple[int, int] | None = None):
-    """Yield ``(frame, image)`` for frames that decode to an image (of ``size`` when given).
-
-    Undecodable frames are counted under their own reason; with ``size`` given, frames of
-    another size are counted as ``size_mismatch``.
-    """
-    for frame in frames:
-        tally.total += 1
-        if frame.error is not None or frame.image is None:
-            tally.reject(getattr(frame.error, "reason", None) or Reason.UNREADABLE)
-            continue
-        img = frame.image
-        if img.ndim < 2 or img.size == 0:
-            tally.reject(Reason.EMPTY)
-            continue
-        if size is not None and (int(img.shape[1]), int(img.shape[0])) != tuple(size):
-            tally.reject(Reason.SIZE_MISMATCH)
-            continue
-        yield frame, img
 
 
 def parse_image_size(text: str | None) -> tuple[int, int] | None:
@@ -229,5 +208,5 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
 
 
 __all__ = ["calibrate_intrinsics", "calibrate_extrinsics", "IntrinsicRun", "ExtrinsicRun", "FrameTally",
-           "usable_images", "SizeGroups", "robot_from_topic", "parse_image_size", "calibrate_without_outlier_views",
+           "SizeGroups", "robot_from_topic", "parse_image_size", "calibrate_without_outlier_views",
            "MIN_SAMPLES"]

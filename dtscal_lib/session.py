@@ -425,11 +425,6 @@ class IntrinsicSession:
         """The coverage bars (X, Y, Size, Skew): of the views the last calibration used, else as they are now."""
         return self._bars if self.result is not None else self._bars_now()
 
-    @property
-    def samples(self) -> int:
-        """Views kept by the last calibration (outliers dropped)."""
-        return 0 if self.result is None else self.result.n_views
-
     # ---- calibrate
     def calibrate(self, solver=None) -> CalibrationResult:
         """Calibrate from the kept views (views that fit far worse dropped); raises with what to do.
@@ -575,21 +570,14 @@ class ExtrinsicSession:
     def __init__(self, camera: CameraModel | None, board: Board = DUCKIETOWN_BOARD, *, robot: str | None = None,
                  keep: str = "first", intrinsics=None, source: str = "the frames"):
         self.board, self.robot, self.keep, self.intrinsics, self.source = board, robot, keep, intrinsics, source
-        self._camera = camera
+        #: the camera whose rectified image the homography maps (settable: a new intrinsic calibration)
+        self.camera = camera
         self.lock = threading.RLock()
         self._tally = FrameTally()
         self.best = None
         self.best_frame = -1
         self.last_error = None
         self.path: Path | None = None
-
-    @property
-    def camera(self) -> CameraModel | None:
-        return self._camera
-
-    @camera.setter
-    def camera(self, camera: CameraModel | None) -> None:
-        self._camera = camera
 
     def forget(self) -> None:
         """Forget the best fit (the robot moved, or a new intrinsic calibration)."""
@@ -606,7 +594,7 @@ class ExtrinsicSession:
         img, reason = _image_of(frame, self._tally)
         if img is None:
             return Offer(False, reason)
-        cam = camera or self._camera
+        cam = camera or self.camera
         if cam is None:
             raise DtscalError("no intrinsic calibration yet: CALIBRATE the intrinsics first")
         try:
@@ -652,13 +640,13 @@ class ExtrinsicSession:
         """The camera's height and pitch recovered from the kept homography."""
         from .ground import camera_pose_from_homography
 
-        return camera_pose_from_homography(self.calibrate().H, self._camera.P[:, :3])
+        return camera_pose_from_homography(self.calibrate().H, self.camera.P[:, :3])
 
     def refusals(self) -> list[Finding]:
         """Why the kit does not believe the homography (a camera looking down at the ground ahead?)."""
         from .ground import ground_homography_doubts
 
-        return as_findings(ground_homography_doubts(self.calibrate().H, self._camera.P[:, :3]), self.kind)
+        return as_findings(ground_homography_doubts(self.calibrate().H, self.camera.P[:, :3]), self.kind)
 
     @property
     def doubts(self) -> list[str]:
@@ -671,7 +659,7 @@ class ExtrinsicSession:
     def _intrinsics(self):
         if self.intrinsics is not None:
             return self.intrinsics
-        return intrinsic_file(self._camera, self.robot or "camera")
+        return intrinsic_file(self.camera, self.robot or "camera")
 
     def write(self, out, keep_anyway: bool = False, fmt: str = "classic") -> Path | None:
         """Write ``out/camera_extrinsic/ROBOT.yaml`` (classic or version ``"2"``), the kit's gate first.
