@@ -196,6 +196,10 @@ def _poison_solvers(used: list) -> None:
                         pass
 
     class Poisoned(types.ModuleType):
+        def __init__(self, name):
+            super().__init__(name)
+            self.__path__ = []  # a package: its submodules come from the Finder below
+
         def __getattr__(self, attr):
             if attr.startswith("__"):
                 raise AttributeError(attr)
@@ -229,7 +233,7 @@ def _poison_solvers(used: list) -> None:
             return Poisoned(spec.name)
 
         def exec_module(self, module):
-            module.__path__ = []
+            pass
 
     sys.meta_path.insert(0, Finder())
 
