@@ -29,6 +29,38 @@ import numpy as np
 
 #: default limits, per check (wall-clock and CPU seconds) and per process (memory)
 WALL_S, CPU_S, MEM_MB, OUTPUT_CHARS = 10.0, 8, 2048, 2000
+#: bounds of the limits an instructor may set (``dtscal grade --wall/--cpu/--mem``):
+#: the reference solutions' slowest check takes well under 1 s, so 600 s per check is already
+#: generous; the preloaded grading process maps 444 MB of address space (VmPeak, numpy +
+#: OpenCV + the kit, measured) before a submission allocates anything: 1024 MB leaves room
+#: for the 640x480 float maps of notebook 04.
+MAX_WALL_S, MAX_CPU_S, MIN_MEM_MB = 600.0, 600, 1024
+
+
+def validate_limits(wall_s, cpu_s, mem_mb) -> None:
+    """Refuse limits that make no sense (NaN, negative, astronomically large), with why."""
+    import math
+
+    from ..errors import DtscalError
+
+    try:
+        wall = float(wall_s)
+    except (TypeError, ValueError):
+        raise DtscalError(f"--wall {wall_s!r}: give the seconds per check as a number") from None
+    if not math.isfinite(wall) or not 0 < wall <= MAX_WALL_S:
+        raise DtscalError(f"--wall {wall_s}: give a time limit per check between 0 and {MAX_WALL_S:g} s "
+                          f"(default {WALL_S:g})")
+    if isinstance(cpu_s, bool) or not isinstance(cpu_s, int) or not 1 <= cpu_s <= MAX_CPU_S:
+        raise DtscalError(f"--cpu {cpu_s}: give whole CPU seconds per check between 1 and {MAX_CPU_S} "
+                          f"(default {CPU_S})")
+    if mem_mb is None:
+        return
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2 ** 20
+    if isinstance(mem_mb, bool) or not isinstance(mem_mb, int) or not MIN_MEM_MB <= mem_mb <= max(total, MIN_MEM_MB):
+        raise DtscalError(f"--mem {mem_mb}: give the memory per submission in MB, between {MIN_MEM_MB} (what the "
+                          f"grading process itself maps) and {total} (this machine's memory); default {MEM_MB}")
+
+
 #: time allowed for starting the child and loading the submission
 LOAD_WALL_S = 30.0
 MAX_ARRAY_BYTES = 256 * 2 ** 20
