@@ -1,22 +1,25 @@
 """The sandboxed side of the grader: runs one submission's functions, never judges them.
 
-Started by :mod:`dtscal_lib.grading.sandbox` as ``python -I -m dtscal_lib.grading.child``.
-It reads its job (pickled by the trusted parent) from stdin, then, before any student code
-runs, locks itself in:
+Started once by :mod:`dtscal_lib.grading.sandbox` as ``python -I child.py --serve FD``: a
+fork server that imports numpy and OpenCV once, then forks, per submission:
 
-* a new network namespace (no interface but loopback) when the kernel allows it;
-* an unprivileged user (``nobody``) when started as root, so files only root may read
-  stay unreadable;
-* resource limits: address space (memory), file size, no core files, process count;
-* a Python audit hook that refuses network sockets, subprocesses, ``ctypes`` library
-  loading, reading the grading material and the solutions, and writing outside the
-  temporary working folder.
-
-It then runs the submission's import and ``def`` statements one by one (reporting each on
-the control pipe, so the parent can skip a statement that kills the process), and for each
-check forks a worker with its own CPU-time and memory limits that calls the functions and
-writes the answers as ``.npy`` files (no pickle) for the parent to judge. A worker that
-loops, crashes, exits or runs out of memory costs that check only.
+* a **supervisor** (trusted, runs no student code): it owns the control pipe to the grader,
+  enters new namespaces (PID, network, and as root a private mount namespace covering the
+  grading material with an empty tmpfs; see :mod:`.barriers`), forks the loader, and relays
+  the loader's messages only when they fit the protocol (a message written by student code
+  while it loads can neither start nor finish a check); each check starts with a random
+  token, and its answers count only if they carry it;
+* a **loader** (init of the PID namespace): before any student code it closes everything of
+  the supervisor's, becomes a fresh uid (root), applies Landlock (writes only in the working
+  folder, no exec, the material unreadable, no TCP, no signals outside the submission),
+  resource limits, a Python audit hook, and replaces OpenCV's and the kit's solving routines
+  by stubs that record the call (run-time academic honesty). It then runs the submission's
+  import and ``def`` statements one by one (reporting each, so the grader can skip one that
+  kills the process);
+* per check, a **worker** forked from the loader, with its own CPU-time limit, which calls
+  the functions and writes the answers as ``.npy`` files (no pickle). After each check the
+  loader kills every other process of the namespace; when the loader dies, the kernel kills
+  the rest. A worker that loops, crashes, exits or runs out of memory costs that check only.
 """
 
 from __future__ import annotations
@@ -85,21 +88,22 @@ def _namespaces(job: dict) -> dict:
     tries = [want, barriers.CLONE_NEWPID] if root else \
         [barriers.CLONE_NEWUSER | want, barriers.CLONE_NEWUSER | barriers.CLONE_NEWPID]
     got = 0
+    uid, gid = os.getuid(), os.getgid()
     for flags in tries:
         try:
-            uid, gid = os.getuid(), os.getgid()
             barriers.unshare(flags)
-            if flags & barriers.CLONE_NEWUSER:  # map our own ids, so files stay ours
-                with open("/proc/self/setgroups", "w") as f:
-                    f.write("deny")
-                with open("/proc/self/uid_map", "w") as f:
-                    f.write(f"{uid} {uid} 1")
-                with open("/proc/self/gid_map", "w") as f:
-                    f.write(f"{gid} {gid} 1")
-            got = flags
-            break
         except OSError as exc:
             notes["namespaces_error"] = str(exc)
+            continue
+        got = flags
+        if flags & barriers.CLONE_NEWUSER:  # map our own ids (unmapped, files are still ours on disk)
+            try:
+                for name, text in (("setgroups", "deny"), ("uid_map", f"{uid} {uid} 1"), ("gid_map", f"{gid} {gid} 1")):
+                    with open(f"/proc/self/{name}", "w") as f:
+                        f.write(text)
+            except OSError as exc:
+                notes["user_namespace"] = f"ids not mapped ({exc})"
+        break
     if got & barriers.CLONE_NEWNS:
         try:
             barriers.hide_folders(job["blocked_paths"])
