@@ -409,7 +409,7 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
                     return remaining
     finally:
         _kill(pid, loader)
-        left = _survivors(pid, loader, uid)
+        left = _survivors(pid, loader, uid, pid_namespace=bool(run.notes.get("pid_namespace")))
         run.notes["survivors"] = run.notes.get("survivors", 0) + left
         os.close(r_ctl)
         drainer.join(timeout=2)
@@ -418,9 +418,25 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
         _SLOTS.give(slot)
 
 
-def _survivors(sid: int, loader: int | None, uid: int | None, rounds: int = 50) -> int:
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] not in "ZX"
+
+
+def _survivors(sid: int, loader: int | None, uid: int | None, rounds: int = 50, pid_namespace=False) -> int:
     """Kill what is left of a submission (its session, its loader, its uid); returns how many
-    processes were still alive after ``rounds`` attempts (0: nothing survives)."""
+    processes were still alive after ``rounds`` attempts (0: nothing survives). In a PID
+    namespace it is enough that its init (the loader) is gone: the kernel kills the rest."""
+    if pid_namespace and loader:
+        for _ in range(rounds):
+            if not _alive(loader) and not _alive(sid):
+                return 0
+            _kill(sid, loader)
+            time.sleep(0.005)
+        pid_namespace = False  # the init would not die: look for everything
     found: list[int] = []
     for _ in range(rounds):
         found = []
