@@ -602,9 +602,9 @@ def load_and_run(job: dict, np, up: int, down: int) -> None:
                 kill(-1, signal.SIGKILL)
             except OSError:
                 pass
-            try:
-                while waitpid(-1, os.WNOHANG)[0]:
-                    pass
+            try:  # reap them all (killed, they die at once), so none counts against the process limit
+                while True:
+                    waitpid(-1, 0)
             except ChildProcessError:
                 pass
         _send(up, {"event": "done", "id": check["id"], "status": status})

@@ -163,7 +163,8 @@ def roster(path, assignment: str | None = None) -> Roster:
 def discover(path, assignment: str | None = None) -> tuple[list[Item], list[str]]:
     """The submissions under ``path`` and the notes on everything else (student: note)."""
     r = roster(path, assignment)
-    return r.items, [f"{s}: {n}" for s in r.students for n in r.notes.get(s, []) if " graded as " not in n]
+    return r.items, [f"{s}: {n}" for s in r.students for n in r.notes.get(s, [])
+                     if " graded as " not in n and not n.endswith("not handed in (0 points)")]
 
 
 def grade_all(items: list[Item], material: Material, *, jobs: int = 1, progress: bool = False,
