@@ -322,3 +322,53 @@ def test_huge_submission_is_not_parsed(tmp_path, material):
     grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
     assert res.score == 0 and any("more than" in n for n in res.notes), res.notes
     assert grown_mb < 100, grown_mb
+
+
+def test_barriers_hold_for_an_unprivileged_grader(outside):
+    """The grader run by an ordinary user (here: this interpreter, forked, as ``nobody``): the
+    supervisor's namespaces and the loader's lock-in still refuse a write outside through a
+    folder descriptor and refuse to run a shell, and the loader is init of its own PID namespace."""
+    from dtscal_lib.grading import barriers, child
+
+    if not barriers.landlock_abi():
+        pytest.skip("this kernel has no Landlock")  # then the uid and the audit hook are the barriers
+    work = Path(tempfile.mkdtemp(prefix="dtscal-work-"))
+    os.chmod(work, 0o777)
+
+    def attempt():
+        notes = child._namespaces({"blocked_paths": [str(ROOT / "grading")]})
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            got = [f"pid {os.getpid()}"]
+            try:
+                child._lock_in({"workdir": str(work), "outdir": str(work), "mem_mb": 4096, "uid": None,
+                                "blocked_paths": [str(ROOT / "grading"), str(ROOT / "solutions")]})
+                fd = os.open(str(outside), os.O_RDONLY)
+                for name, act in (("create", lambda: os.close(os.open("x", os.O_WRONLY | os.O_CREAT, dir_fd=fd))),
+                                  ("exec", lambda: os.execv("/bin/sh", ["sh", "-c", f"touch {outside}/y"])),
+                                  ("read", lambda: open(CASES).read())):
+                    try:
+                        act()
+                        got.append(f"{name} allowed")
+                    except OSError:
+                        got.append(f"{name} refused")
+                open("inside", "w").write("ok")
+            except BaseException as exc:  # noqa: BLE001
+                got.append(repr(exc))
+            os.write(w, " ".join(got).encode())
+            os._exit(0)
+        os.close(w)
+        text = os.read(r, 10000).decode()
+        os.waitpid(pid, 0)
+        return f"{notes.get('pid_namespace')} {text}"
+
+    try:
+        ok, got = run_unprivileged(attempt, timeout=60)
+        assert ok, got
+        assert "create refused" in got and "exec refused" in got and "read refused" in got, got
+        assert os.listdir(outside) == [] and (work / "inside").is_file(), got
+        if got.startswith("True"):
+            assert "pid 1 " in got, got
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
