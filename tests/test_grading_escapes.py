@@ -214,6 +214,21 @@ def test_no_process_outlives_its_check(outside):
     assert run.notes["survivors"] == 0
 
 
+@pytest.mark.parametrize("without", [("namespaces",), ("namespaces", "landlock")])
+def test_no_process_outlives_without_namespaces(outside, monkeypatch, without):
+    """The fallbacks of a machine without PID namespaces (and without Landlock): the check's
+    process group, then the grader's look for the submission's session and uid."""
+    monkeypatch.setattr(sandbox, "WITHOUT", set(without))
+    marker = outside / "marker"
+    marker.write_text("x")
+    os.chmod(marker, 0o644)
+    run = _run(MARKER_CHILD.format(n=20, marker=str(marker)))
+    assert float(_value(run, 0)) == 1.0
+    assert not run.notes["pid_namespace"]
+    assert _holders(marker) == []
+    assert run.notes["survivors"] == 0
+
+
 def test_side_by_side_submissions_cannot_kill_each_other():
     """With two submissions graded at once, one calling ``kill(-1, SIGKILL)`` over and over,
     the other still gets its answer."""

@@ -214,8 +214,9 @@ class _CapData(ctypes.Structure):
 def become(uid: int, read_everything: bool) -> None:
     """(root) Become ``uid``/``gid`` with no groups; with ``read_everything``, keep only the
     capability to read any file (CAP_DAC_READ_SEARCH), for a Python installed where other
-    users cannot read it. Only with Landlock on: it then still hides the material and the
-    uid can write nothing but what it owns."""
+    users cannot read it (Landlock, where the kernel has it, still hides the material; without
+    it that uid is still far less than root: it can write only what it owns, signal only its
+    own processes)."""
     lib = libc()
     if read_everything:
         _check(lib.prctl(PR_SET_KEEPCAPS, 1, 0, 0, 0), "prctl(KEEPCAPS)")
