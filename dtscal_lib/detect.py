@@ -438,17 +438,17 @@ REFINE_SIGMA = 1.0
 POLISH_MAX_MOVE_PX = 0.1
 #: an inner corner farther than this from the smooth (quadratic) grid through its 8 neighbours
 #: (:func:`grid_jump`; in pixels, or this fraction of its local square size, whichever is larger)
-#: jumped off the grid. Measured (``benchmarks/grid_tolerance.py``): on the 26 real photographs of
-#: ``data/real/`` (728 inner corners) the jump of true corners is median 0.12 px, 99th percentile
-#: 0.36 px, largest 0.49 px (0.017 of a square), i.e. 1.5 x the corner noise of about 0.07 px per
-#: coordinate; the same photographs curled smoothly (``cv2.remap`` with a displacement field of 3-5 px
-#: amplitude and 300 px wavelength, the corners accurate to 0.25 px against the warped truth) give at
-#: most 0.75 px (0.05 of a square). 1 px is twice the largest clean jump and stays above the curled
-#: ones; 0.1 of a square leaves room for wavier prints (200 px wavelength: up to 2.0 px on 27 px
-#: squares), while a corner pulled off by a tenth of a square, the typical error of a corner window
-#: reaching the board's edge, is still caught. A homography through the neighbours (the check before)
-#: cannot follow a bend: on the same curled photographs it is off by up to 2.8-4.1 px, and it refused
-#: Duckietown's curled DD24 print (1.74 px against a 1.59 px tolerance).
+#: jumped off the grid. Measured by ``benchmarks/grid_tolerance.py`` on the 26 real photographs of
+#: ``data/real/``: flat, the 728 inner corners jump by median 0.12 px, 99th percentile 0.36 px, at most
+#: 0.49 px (0.017 of a square), i.e. a corner noise of about 0.07 px per coordinate (the jump's noise
+#: gain is 1.5); curled smoothly (``cv2.remap``; copies at 0.6x, squares of 12-23 px as Duckietown's
+#: 17 mm squares on the floor, the print curling up by 6 or 12 px at its sides; or full size, waves of
+#: 5 px amplitude and 300 px wavelength) at most 1.84 px, 0.084 of a square, and none of these is
+#: refused by this check. 1 px is twice the largest flat jump; 0.1 of a square stays above the curled
+#: ones while a corner pulled off by a tenth of a square (a corner window reaching the board's edge)
+#: is still caught (``tests/test_detect_curled.py``). The former check, a homography through the same
+#: neighbours with max(0.75 px, 0.1 square), cannot follow a bend: it refused 5 of the 26 views curled
+#: by 12 px, 5 of the 52 waved ones, and Duckietown's curled DD24 print (1.74 px against 1.59 px).
 GRID_TOLERANCE_PX = 1.0
 GRID_TOLERANCE_FRACTION = 0.1
 REASON_INCONSISTENT = Reason.INCONSISTENT_GRID

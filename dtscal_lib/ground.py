@@ -194,15 +194,13 @@ def resize_to_width(image: np.ndarray, width: int = dt.IMAGE_SIZE[0]) -> np.ndar
     return cv2.resize(image, (int(width), new_h), interpolation=interp)
 
 
-def _find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, str]:
-    """Corners of the board in the rectified frame: ``(corners (N, 2) or None, reason)``.
+def _find_corners(image: np.ndarray, board: Board):
+    """The board in the rectified frame: a :class:`~dtscal_lib.detect.Detection`.
 
-    ``reason`` is ``"found"``, ``"no_board"`` or ``"at_border"``. One still frame, so the
-    thorough detector (:func:`dtscal_lib.detect.detect_board_still`) is affordable: on the
-    rectified floor view the far squares are only about 12 px tall.
+    One still frame, so the thorough detector (:func:`dtscal_lib.detect.detect_board_still`) is
+    affordable: on the rectified floor view the far squares are only about 12 px tall.
     """
-    det = detect_board_still(image, board, border_margin=dt.BORDER_MARGIN_PX)
-    return det.corners, "found" if det.found else det.reason
+    return detect_board_still(image, board, border_margin=dt.BORDER_MARGIN_PX)
 
 
 def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
@@ -244,7 +242,15 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
             "use frames from the calibrated camera mode", reason=Reason.SIZE_MISMATCH,
         )
     rectified = rectify_image(frame, camera.rectification_maps())
-    corners, reason = _find_corners(rectified, board)
+    det = _find_corners(rectified, board)
+    corners, reason = det.corners, ("found" if det.found else det.reason)
+    if reason == Reason.INCONSISTENT_GRID:
+        raise CalibrationError(
+            f"the board ({board.describe()}) was found in the rectified image but rejected: {det.detail}. "
+            "A smoothly curled print passes this check; a corner that jumps off its neighbours' grid is "
+            "mis-detected (glare, a crease, a shadow or clutter on that corner): flatten the board, "
+            "light it evenly and take another frame", reason=Reason.INCONSISTENT_GRID,
+        )
     if reason == Reason.AT_BORDER:
         raise CalibrationError(
             f"the board ({board.describe()}) was found but some corners are within {dt.BORDER_MARGIN_PX} px "
