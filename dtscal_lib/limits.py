@@ -114,8 +114,8 @@ TABLE: tuple[Limit, ...] = (
           "the checkerboard's squares seen from above must have the printed pattern's colours (the square "
           "outside the near-right inner corner dark); a mirrored frame swaps them. Below this contrast "
           "between light and dark squares the colours are not trusted and nothing is said",
-          "Duckietown's printed pattern (tests/test_ground.py: near-right square dark); a rectified "
-          "board on the floor shows 80-150 grey levels between its squares"),
+          "Duckietown's printed pattern (tests/test_ground.py: near-right square dark); the synthetic "
+          "session's rectified floor views show +176 to +181 grey levels, their mirror images -176 to -181"),
 )
 
 #: every limit by name
