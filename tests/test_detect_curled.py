@@ -131,3 +131,26 @@ def test_wavy_real_boards_are_found_with_accurate_corners(phase):
         det = detect_board_still(_warp(img, d), BOARD)
         assert det.found, f"{name}: wavy board refused: {det.reason}: {det.detail}"
         assert np.linalg.norm(det.corners - truth, axis=1).max() < 0.3
+
+
+def test_extrinsics_say_found_and_rejected_naming_the_corner(monkeypatch):
+    """The extrinsic procedure reports a board the grid check rejected as found-and-rejected, never 'not found'."""
+    from dtscal_lib import duckietown as dt
+    from dtscal_lib import ground
+    from dtscal_lib.boards import DUCKIETOWN_BOARD
+    from dtscal_lib.camera import CameraModel
+    from dtscal_lib.detect import Detection
+    from dtscal_lib.errors import CalibrationError
+
+    detail = "corner at row 3, column 4 (pixel 320.0, 300.0) is 2.40 px from where its 8 neighbours put it " \
+             "(tolerance 1.60 px)"
+    rejected = Detection(False, np.zeros((DUCKIETOWN_BOARD.n_corners, 2)), "inconsistent_grid", DUCKIETOWN_BOARD,
+                         (640, 480), detail)
+    monkeypatch.setattr(ground, "detect_board_still", lambda *a, **k: rejected)
+    camera = CameraModel(dt.default_K(), dt.default_dist(), dt.IMAGE_SIZE)
+    with pytest.raises(CalibrationError) as e:
+        ground.extrinsics_from_image(np.zeros((480, 640, 3), np.uint8), camera)
+    assert e.value.reason == "inconsistent_grid"
+    msg = str(e.value)
+    assert "was found in the rectified image but rejected: corner at row 3, column 4" in msg and "2.40 px" in msg
+    assert "not found" not in msg
