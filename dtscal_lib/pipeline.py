@@ -81,7 +81,7 @@ class IntrinsicRun:
             frames=self.tally.to_dict(),
             coverage={b.name: round(float(b.progress), 4) for b in self.bars},
             output=str(self.path) if self.path else None,
-            doubts=list(self.doubts),
+            doubts=[str(d) for d in self.doubts],
         )
         return out
 
@@ -167,7 +167,7 @@ class ExtrinsicRun:
             "frames": self.tally.to_dict(),
             "output": str(self.path) if self.path else None,
             "camera_pose": dict(self.camera_pose),
-            "doubts": list(self.doubts),
+            "doubts": [str(d) for d in self.doubts],
         }
 
 

@@ -43,11 +43,11 @@ from .camera import CameraModel, as_size
 from .coverage import CoverageTracker
 from .detect import detect_board
 from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError, Reason, opencv_message
-from .quality import Finding
+from .findings import Finding
 
 __all__ = ["IntrinsicSession", "ExtrinsicSession", "Offer", "FrameTally", "SizeGroups", "as_findings",
            "robot_from_topic", "robot_name", "camera_name", "intrinsic_file", "calibrate_without_outlier_views",
-           "MIN_SAMPLES", "REFUSED"]
+           "MIN_SAMPLES"]
 
 #: fewer samples than this cannot give a trustworthy calibration
 MIN_SAMPLES = 3
@@ -55,8 +55,6 @@ MIN_SAMPLES = 3
 OUTLIER_FACTOR = 3.0
 #: never drop more than this share of the views as outliers
 MAX_OUTLIER_SHARE = 0.2
-#: severity of a Finding that stops the result from being written (a plausibility doubt)
-REFUSED = "refused"
 
 
 # --------------------------------------------------------------------------- the robot's name: one rule
@@ -103,28 +101,23 @@ def intrinsic_file(camera: CameraModel, robot: str) -> calib_files.IntrinsicCali
 
 # --------------------------------------------------------------------------- findings
 def as_findings(items, kind: str = "intrinsic") -> list[Finding]:
-    """Refusals as :class:`~dtscal_lib.quality.Finding` s, whether the judge gave strings or Findings.
+    """Refusals as :class:`~dtscal_lib.findings.Finding` s, whether a judge gave strings or Findings.
 
     The plausibility checks (:func:`~dtscal_lib.plausibility.intrinsic_doubts`,
-    :func:`~dtscal_lib.ground.ground_homography_doubts`) are the refusals; a bare string becomes a
-    Finding of severity :data:`REFUSED`, code ``implausible_<kind>``; a Finding is kept as it is.
+    :func:`~dtscal_lib.ground.ground_homography_doubts`) are the refusals; a Finding is kept as it is,
+    a bare string becomes a Finding of severity ``bad`` (a refusal's), code ``implausible_<kind>``.
     """
     out = []
     for item in items or ():
         if isinstance(item, Finding):
             out.append(item)
         else:
-            out.append(Finding(f"implausible_{kind}", REFUSED, str(item),
-                               "record again as described, or keep it anyway (expert) beside the robot's file"))
+            out.append(Finding(f"implausible_{kind}", "bad", str(item), ""))
     return out
 
 
-def _message(f) -> str:
-    return f.message if isinstance(f, Finding) else str(f)
-
-
 def _refusal(refusals, kind: str, robot: str) -> ImplausibleCalibrationError:
-    doubts = [_message(f) for f in refusals]
+    doubts = list(refusals)
     listed = "".join(f"\n  - {d}" for d in doubts)
     where = f"camera_{kind}/{robot}.yaml"
     return ImplausibleCalibrationError(
@@ -479,9 +472,9 @@ class IntrinsicSession:
         return cached
 
     @property
-    def doubts(self) -> list[str]:
-        """The refusals' messages (empty before CALIBRATE and for a believable result)."""
-        return [] if self.result is None else [_message(f) for f in self.refusals()]
+    def doubts(self) -> list[Finding]:
+        """The refusals (empty before CALIBRATE and for a believable result); ``str()`` of each says what to do."""
+        return [] if self.result is None else list(self.refusals())
 
     def quality(self, known=None):
         """The verdict (:class:`~dtscal_lib.quality.Quality`, or a message when it cannot be made).
@@ -501,8 +494,8 @@ class IntrinsicSession:
         return q
 
     def judge(self) -> list[Finding]:
-        """Verdict and refusals together: the verdict's findings, then the refusals (severity ``refused``
-        for a plausibility doubt). A result with refusals is not written unless kept anyway."""
+        """Verdict and refusals together: the verdict's findings, then the refusals (:meth:`refusals`, the
+        plausibility doubts). A result with refusals is not written unless kept anyway."""
         q = self.quality()
         verdict = list(getattr(q, "findings", [])) if not isinstance(q, str) else [
             Finding("no_verdict", "doubtful", q, "the calibration itself is kept; check it with --report")]
@@ -646,11 +639,14 @@ class ExtrinsicSession:
         """Why the kit does not believe the homography (a camera looking down at the ground ahead?)."""
         from .ground import ground_homography_doubts
 
-        return as_findings(ground_homography_doubts(self.calibrate().H, self.camera.P[:, :3]), self.kind)
+        res = self.calibrate()
+        return as_findings(ground_homography_doubts(res.H, self.camera.P[:, :3], board=self.board,
+                                                    pattern_contrast=getattr(res, "pattern_contrast", None)),
+                           self.kind)
 
     @property
-    def doubts(self) -> list[str]:
-        return [] if self.best is None else [_message(f) for f in self.refusals()]
+    def doubts(self) -> list[Finding]:
+        return [] if self.best is None else list(self.refusals())
 
     def judge(self) -> list[Finding]:
         """The refusals (a homography has no verdict beyond its corner residuals, reported with it)."""

@@ -108,9 +108,9 @@ def test_the_library_refuses_the_same_views_through_the_session(parallel_views, 
         session.offer(f)
     session.calibrate()
     judged = session.judge()
-    refusals = [f for f in judged if f.severity == "refused"]
-    assert refusals and [f.message for f in refusals] == session.doubts
-    assert any(f.code == "parallel_views" for f in judged)  # the verdict's finding, in the same list
+    refusals = session.refusals()
+    assert refusals and refusals == session.doubts and judged[-len(refusals):] == refusals
+    assert len(judged) > len(refusals)  # the verdict's findings come first, in the same list
     with pytest.raises(ImplausibleCalibrationError):
         session.write(tmp_path)
     with pytest.raises(ImplausibleCalibrationError):
@@ -119,11 +119,11 @@ def test_the_library_refuses_the_same_views_through_the_session(parallel_views, 
 
 
 def test_findings_adapter_takes_strings_and_findings():
-    from dtscal_lib.quality import Finding
+    from dtscal_lib.findings import Finding
 
     f = Finding("x", "bad", "m", "a")
     out = as_findings(["a doubt", f], "intrinsic")
-    assert out[1] is f and out[0].message == "a doubt" and out[0].severity == "refused"
+    assert out[1] is f and str(out[0]) == "a doubt" and out[0].severity == "bad"
     assert out[0].code == "implausible_intrinsic"
 
 

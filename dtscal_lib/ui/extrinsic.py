@@ -306,7 +306,7 @@ class LiveExtrinsics:
             text = (f"SAVE: wrote {path} (best fit, frame {frame}, mean error "
                     f"{np.mean(best.residual_mm):.2f} mm)")
             if self.session.doubts:
-                return self._say(text + "; kept against the kit's doubts: " + "; ".join(self.session.doubts)
+                return self._say(text + "; kept against the kit's doubts: " + "; ".join(map(str, self.session.doubts))
                                  + ". It is not sent to the robot.", "error")
             if self.target.value == "robot":
                 text += "; " + self.session.commit(master_uri=getattr(self.source, "master", None),

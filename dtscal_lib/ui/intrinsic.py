@@ -334,7 +334,7 @@ class LiveCalibrator:
             path = self.session.write(self.folder_text.value.strip(), keep_anyway=keep)
             if self.session.doubts:
                 return self._say(f"COMMIT: kept as {path} beside the robot's file, against the kit's doubts: "
-                                 + "; ".join(self.session.doubts) + ". It is not sent to the robot.", "error")
+                                 + "; ".join(map(str, self.session.doubts)) + ". It is not sent to the robot.", "error")
             if self.commit_target.value == "folder":
                 return self._say(f"COMMIT: wrote {path} (the previous file, if any, is kept as .bak)", "ok")
             answer = self.session.commit(master_uri=getattr(self.source, "master", None))
