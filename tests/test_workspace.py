@@ -96,7 +96,7 @@ def test_update_reports_code_it_cannot_carry(tmp_path):
     report = ws.update_workspace(root, stamp="t2")
     assert not report.ok
     text = report.text()
-    assert "COULD NOT CARRY OVER" in text and "02_homography.ipynb" in text and "backups" in text
+    assert "KEPT IN A MARKED CELL" in text and "02_homography.ipynb" in text and "backups" in text
     assert (wsdir / "backups" / "t2" / "02_homography.ipynb").exists()
 
 
