@@ -3,6 +3,7 @@
 Sub-commands::
 
     dtscal course                  open the course in JupyterLab (the student's workspace/; --instructor: solutions/)
+    dtscal handin                  zip the student's workspace notebooks into handin/NAME.zip
     dtscal synth --out data        regenerate the synthetic recorded Duckiebot session
     dtscal calibrate-intrinsics    frames -> camera_intrinsic/<ROBOT>.yaml
     dtscal calibrate-extrinsics    one frame on the board -> camera_extrinsic/<ROBOT>.yaml
@@ -248,6 +249,17 @@ def cmd_course(args) -> int:
     return 0  # pragma: no cover
 
 
+def cmd_handin(args) -> int:
+    from .course import handin
+    from .paths import repo_root
+
+    path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
+    print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
+    print("hand in this file (upload it to Gradescope, or as your instructor says); with GitHub Classroom, "
+          "commit and push instead: git add workspace && git commit -m 'hand in' && git push")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dtscal", description="Duckietown camera-calibration kit")
     sub = p.add_subparsers(dest="command", required=True)
@@ -315,6 +327,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--update", action="store_true",
                     help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
     sp.set_defaults(func=cmd_course)
+
+    sp = sub.add_parser("handin", help="zip your workspace notebooks into handin/NAME.zip to hand in")
+    sp.add_argument("--name", help="your name, for the file name (default: git's user.name, else your login)")
+    sp.add_argument("--out", metavar="FILE.zip", help="where to write the zip (default handin/NAME.zip)")
+    sp.set_defaults(func=cmd_handin)
 
     try:
         from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)

@@ -95,6 +95,33 @@ def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> 
     return out
 
 
+def unpack_zip_submission(path, into) -> Path:
+    """A submission zip (``dtscal handin``'s ``NAME.zip``) unpacked into ``into/NAME/``; other paths as they are.
+
+    ``dtscal grade NAME.zip`` then grades the folder as the student ``NAME``, as Gradescope, which
+    unpacks an uploaded zip into its submission folder, does. Only notebooks and .py files are
+    taken, each by its base name (no path in the zip can point outside ``into``).
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".zip":
+        return path
+    if not path.is_file():
+        raise DtscalError(f"{path} does not exist: give the hand-in zip, a notebook or a folder")
+    folder = Path(into) / path.stem
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                name = Path(info.filename).name
+                if info.is_dir() or not name.endswith((".ipynb", ".py")) or name.startswith("."):
+                    continue
+                (folder / name).write_bytes(z.read(info))
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise DtscalError(f"{path} is not a readable zip ({exc}); ask the student for `dtscal handin`'s file "
+                          "again") from None
+    return folder
+
+
 def _add_text(z: zipfile.ZipFile, name: str, text: str) -> None:
     info = zipfile.ZipInfo(name)
     info.external_attr = 0o755 << 16

@@ -43,8 +43,14 @@ def cmd_grade(args) -> int:
         raise DtscalError("give a submission (notebook, .py file or folder), or --gradescope-bundle OUT.zip")
     if args.jobs < 1:
         raise DtscalError("--jobs must be at least 1")
+    import tempfile
+
+    from .bundle import unpack_zip_submission
+
     material = Material.load(args.material)
-    items, skipped = discover(args.submission, args.assignment)
+    unpacked = tempfile.TemporaryDirectory(prefix="dtscal-handin-")  # a hand-in zip (`dtscal handin`)
+    submission = unpack_zip_submission(args.submission, unpacked.name)
+    items, skipped = discover(submission, args.assignment)
     for s in skipped:
         print(f"skipped {s}", file=sys.stderr)
     results = grade_all(items, material, jobs=args.jobs, progress=not args.quiet,
