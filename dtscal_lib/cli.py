@@ -219,7 +219,7 @@ def cmd_release(args) -> int:
         print("notebooks/ matches solutions/")
         return 0
     if args.execute:
-        for p in release.execute_solutions(root / "solutions"):
+        for p in release.execute_solutions(root / "solutions", progress=True):
             print(f"executed {p}")
     if args.write or args.execute:
         for p in release.generate_notebooks(root / "solutions", root / "notebooks"):
@@ -352,7 +352,8 @@ def _no_grader(args) -> int:
 def release_args(sp) -> None:
     sp.add_argument("out", nargs="?", help="folder to write the student release into")
     sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
-    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/")
+    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/ (seconds; enough "
+                    "after a change to text or code that leaves the stored outputs as they are)")
     sp.add_argument("--execute", action="store_true",
                     help="re-run every solution notebook (storing its outputs), then regenerate notebooks/")
     sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")

@@ -651,18 +651,45 @@ def inject_solutions(student_nb: NotebookNode, solution_nb: NotebookNode) -> Not
 
 
 # --------------------------------------------------------------------------- maintaining solutions
-def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, timeout: int = 300) -> list[Path]:
+#: the output of a displayed widget: a random model id per run, and no use without the live kernel
+WIDGET_VIEW = "application/vnd.jupyter.widget-view+json"
+
+
+def strip_widget_outputs(nb: NotebookNode) -> int:
+    """Drop widget views (random ``model_id``) from stored outputs, keeping their text; returns how many.
+
+    nbval does not compare widget views, and the widget state is not stored, so a view is only a
+    model id that changes on every run (noise in every diff). The output's ``text/plain`` stays.
+    """
+    n = 0
+    nb.metadata.pop("widgets", None)  # widget state is rebuilt when the notebook is opened
+    for cell in nb.cells:
+        for out in cell.get("outputs", []) if cell.cell_type == "code" else []:
+            data = out.get("data")
+            if data and WIDGET_VIEW in data:
+                del data[WIDGET_VIEW]
+                n += 1
+                if not data:
+                    data["text/plain"] = "a widget (shown when the notebook runs in JupyterLab)"
+    return n
+
+
+def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, timeout: int = 300,
+                      progress: bool = False) -> list[Path]:
     """Run solution notebooks top to bottom and store their outputs (what nbval compares).
 
     Each notebook runs in its own folder, as JupyterLab and nbval run it. Per-cell execution
-    timestamps are dropped so that re-running an unchanged notebook leaves the file unchanged
-    wherever the outputs are deterministic.
+    timestamps and widget views (:func:`strip_widget_outputs`) are dropped so that re-running an
+    unchanged notebook leaves the file unchanged wherever the outputs are deterministic.
 
     Parameters
     ----------
     solutions_dir : folder of solution notebooks
     names : optional file names (``02_homography.ipynb``) to run; default all
+    progress : a line per notebook and a bar of its code cells on stderr
     """
+    import sys
+
     from nbclient import NotebookClient
 
     paths = _solution_paths(Path(solutions_dir))
@@ -672,15 +699,29 @@ def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, time
         if unknown:
             raise DtscalError(f"no solution notebook named {', '.join(sorted(unknown))} in {solutions_dir}")
         paths = [p for p in paths if p.name in wanted]
-    for path in paths:
+    for k, path in enumerate(paths, 1):
         nb = _read(path)
-        nb.metadata.pop("widgets", None)  # widget state is rebuilt when the notebook is opened
+        nb.metadata.pop("widgets", None)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            print(f"executing {path.name} ({k}/{len(paths)})", file=sys.stderr, flush=True)
+            bar = tqdm(total=sum(c.cell_type == "code" for c in nb.cells), desc=path.stem, unit="cell",
+                       file=sys.stderr, leave=False, disable=None)
+        client = NotebookClient(nb, timeout=timeout, kernel_name="python3", store_widget_state=False,
+                                resources={"metadata": {"path": str(path.parent)}})
+        if bar is not None:
+            client.on_cell_executed = lambda **_kw: bar.update(1)
         try:
-            NotebookClient(nb, timeout=timeout, kernel_name="python3", store_widget_state=False,
-                           resources={"metadata": {"path": str(path.parent)}}).execute()
+            client.execute()
         except Exception as exc:
             raise DtscalError(f"{path.name} failed while executing; fix the notebook and run again: {exc}") from exc
+        finally:
+            if bar is not None:
+                bar.close()
         for cell in nb.cells:
             cell.metadata.pop("execution", None)
+        strip_widget_outputs(nb)
         path.write_text(_writes(nb))
     return paths
