@@ -63,10 +63,12 @@ def discover(path, assignment: str | None = None) -> tuple[list[Item], list[str]
     subdirs = sorted(d for d in path.iterdir() if d.is_dir() and not d.name.startswith((".", "__")))
     top = sorted(p for p in path.iterdir() if p.is_file() and p.suffix in SUFFIXES)
     named = [p for p in top if assignment_of(p.name)]
-    if top and not subdirs and len(named) == len(top) and len({assignment_of(p.name) for p in top}) == len(top) \
-            and not forced:
-        for p in top:  # one student's folder: notebooks named after the assignments
+    if named and not subdirs and len({assignment_of(p.name) for p in named}) == len(named) and not forced:
+        for p in named:  # one student's folder: notebooks named after the assignments
             add(path.name, p)
+        for p in top:  # e.g. 06_duckiebot_camera.ipynb of a `dtscal handin` zip: no hidden cases
+            if p not in named:
+                skipped.append(f"{p}: not an assignment with hidden cases; not graded")
         return items, skipped
     for p in top:
         add(p.stem, p)
