@@ -156,3 +156,24 @@ def test_time_to_the_sentence_benchmark(ros_ok, monkeypatch, capsys):
     _sentence(monkeypatch, f"ros:{ROBOT}", {"ROS_MASTER_URI": f"http://127.0.0.1:{port}"})
     with capsys.disabled():
         print(f"\nclosed port: sentence after {time.perf_counter() - t0:.2f} s")
+
+
+def test_notebook_status_line_shows_the_sentence_without_a_frame(playing, monkeypatch):
+    """Notebook 06's calibrator: the status line says why, while no frame has come (connecting and error)."""
+    from dtscal_lib.ui import LiveCalibrator
+
+    for k, v in {"ROS_MASTER_URI": playing["ROS_MASTER_URI"], "ROS_HOSTNAME": "127.0.0.1"}.items():
+        monkeypatch.setenv(k, v)
+    app = LiveCalibrator(open_live("ros:nosuchbot"))
+    try:
+        _wait(lambda: "knows no robot named nosuchbot" in app.status.value, 30, "the status line")
+        assert f"use ros:{ROBOT}" in app.status.value and app.frames_seen == 0
+    finally:
+        app.close()
+    port = _free_port()
+    app = LiveCalibrator(open_live(f"ros:{ROBOT}", master_uri=f"http://127.0.0.1:{port}"))
+    try:
+        _wait(lambda: f"nothing listens on port {port}" in app.status.value, 30, "the status line")
+        assert "source lost" in app.status.value
+    finally:
+        app.close()
