@@ -402,7 +402,11 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
         plans = []  # (name, merged notebook or None (new), old path)
         for new_path in course:
             old_path = ws / new_path.name
-            new = nbformat.read(str(new_path), as_version=4)
+            try:
+                new = nbformat.read(str(new_path), as_version=4)
+            except Exception as exc:  # noqa: BLE001 (a damaged course is the instructor's to fix)
+                raise DtscalError(f"the course notebook {new_path} cannot be read ({type(exc).__name__}); unpack "
+                                  "the course again; nothing was changed") from None
             if not old_path.exists():
                 plans.append((new_path.name, new, None))
                 continue
@@ -419,7 +423,12 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
                 except Exception:  # noqa: BLE001 (a broken base only makes the merge more careful)
                     base = None
             _check_writable(old_path)
-            merged, placed, kept, own = merge_notebook(old, new, base, new_path.name)
+            try:
+                merged, placed, kept, own = merge_notebook(old, new, base, new_path.name)
+            except Exception as exc:  # noqa: BLE001 (never lose a notebook to a merge it cannot do)
+                report.not_carried.append(f"{new_path.name}: could not be merged ({type(exc).__name__}: {exc}); "
+                                          "left as it is")
+                continue
             _mine, problems = student_regions(old)
             report.kept += kept
             report.kept += [f"{new_path.name}: {p} (the cell is kept as it was)" for p in problems
