@@ -162,11 +162,15 @@ def test_notebook_status_line_shows_the_sentence_without_a_frame(playing, monkey
     """Notebook 06's calibrator: the status line says why, while no frame has come (connecting and error)."""
     from dtscal_lib.ui import LiveCalibrator
 
+    monkeypatch.delenv("ROS_IP", raising=False)
     for k, v in {"ROS_MASTER_URI": playing["ROS_MASTER_URI"], "ROS_HOSTNAME": "127.0.0.1"}.items():
         monkeypatch.setenv(k, v)
     app = LiveCalibrator(open_live("ros:nosuchbot"))
     try:
-        _wait(lambda: "knows no robot named nosuchbot" in app.status.value, 30, "the status line")
+        try:
+            _wait(lambda: "knows no robot named nosuchbot" in app.status.value, 30, "the status line")
+        except BaseException:
+            pytest.fail(f"the status line says: {app.status.value}")
         assert f"use ros:{ROBOT}" in app.status.value and app.frames_seen == 0
     finally:
         app.close()
