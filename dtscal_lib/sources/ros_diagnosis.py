@@ -156,7 +156,10 @@ def topic_problem(uri: str, topic: str, robot: str | None) -> str | None:
     if any(t == topic and nodes for t, nodes in state[0]):
         return None
     robots = camera_robots(state)
-    names = {seg for group in state for t, nodes in group for seg in [t.split("/")[1] if t.count("/") > 1 else ""]
+    # the robot's namespace from what is published or served there (subscriptions do not count: a
+    # subscriber of /ROBOT/camera_node/... , such as this kit itself, says nothing about the robot)
+    names = {seg for group in (state[0], state[2]) for t, nodes in group if nodes
+             for seg in [t.split("/")[1] if t.count("/") > 1 else ""]
              + [n.split("/")[1] for n in nodes if n.count("/") > 1]}
     if robot and robot not in names:
         if robots:
