@@ -22,9 +22,10 @@ import argparse
 import json
 import os
 import sys
+import warnings
 from pathlib import Path
 
-from .errors import DtscalError, ImplausibleCalibrationError
+from .errors import CalibrationFileWarning, DtscalError, ImplausibleCalibrationError
 
 #: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
 EXIT_REFUSED = 3
@@ -360,10 +361,20 @@ def release_args(sp) -> None:
     sp.set_defaults(func=cmd_release)
 
 
+def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    if issubclass(category, CalibrationFileWarning):
+        print(f"dtscal: warning: {message}", file=sys.stderr)
+    else:
+        print(warnings.formatwarning(message, category, filename, lineno, line), end="", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():  # a file read as Duckietown reads it, with a remark: one line, no traceback
+            warnings.simplefilter("always", CalibrationFileWarning)
+            warnings.showwarning = _print_warning
+            return int(args.func(args) or 0)
     except ImplausibleCalibrationError as exc:
         print(f"dtscal: error: {_cli_wording(str(exc))}", file=sys.stderr)
         return EXIT_REFUSED

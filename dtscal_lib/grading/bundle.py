@@ -7,7 +7,8 @@ image is built, then ``run_autograder`` for every submission: the student's file
 The zip holds the kit's library, the hidden cases (``grading/``) and the solution notebooks
 (references). ``setup.sh`` installs the library into a virtual environment and makes
 ``grading/`` and ``solutions/`` readable by root only; the sandbox runs student code as
-user ``nobody``. ``run_autograder`` always writes a results file, even if grading fails.
+a fresh uid behind Landlock and namespaces (docs/grading-sandbox.md). ``run_autograder``
+always writes a results file, even if grading fails.
 For a local test, ``DTSCAL_AUTOGRADER_ROOT`` replaces ``/autograder`` and ``DTSCAL_PYTHON``
 the virtual environment's Python.
 """
