@@ -46,8 +46,13 @@ def cmd_grade(args) -> int:
     if not 1 <= args.jobs <= 64:
         raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
     validate_limits(args.wall, args.cpu, args.mem)
+    import tempfile
+
+    from .bundle import unpack_zip_submission
+
     material = Material.load(args.material)
-    r = roster(args.submission, args.assignment)
+    unpacked = tempfile.TemporaryDirectory(prefix="dtscal-handin-")  # a hand-in zip (`dtscal handin`)
+    r = roster(unpack_zip_submission(args.submission, unpacked.name), args.assignment)
     for student in r.students:  # also in the CSV and JSON, next to the student's grades
         for n in r.notes.get(student, []):
             print(f"{student}: {n}", file=sys.stderr)
