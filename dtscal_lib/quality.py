@@ -57,6 +57,9 @@ import cv2
 import numpy as np
 
 from .camera import pixel_to_normalized, project_points, undistort_normalized
+from .covariance import projection_covariance, rodrigues
+from .errors import CalibrationError, DtscalError
+from .homography import estimate_homography
 
 __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "residuals", "grid_indices",
            "projection_uncertainty", "image_region", "REGION_NAMES"]
@@ -226,8 +229,6 @@ def residuals(result) -> list[np.ndarray]:
 
 def _need_observations(result) -> None:
     if not getattr(result, "object_points", None) or len(result.object_points) != result.n_views:
-        from .errors import CalibrationError
-
         raise CalibrationError("this calibration result does not carry its views (object_points, image_points); "
                                "recompute it with dtscal_lib.calibration.calibrate to judge its quality")
 
@@ -286,27 +287,9 @@ def corner_noise(object_points, image_points) -> tuple[float, int]:
 
 
 # =========================================================================== projection uncertainty
-def _full_covariance(result) -> tuple[np.ndarray, int]:
-    """``sigma^2 (J^T J)^-1`` over all parameters ``[intrinsics, pose_0 (rvec, t), pose_1, ...]``."""
-    from .calibration import _dist_indices, _normal_blocks, _Problem
-
-    dist_idx = _dist_indices(result.model, fix_k3="k3" not in result.std)
-    problem = _Problem([np.asarray(o)[:, :2] for o in result.object_points], result.image_points,
-                       result.skew, dist_idx)
-    theta = np.concatenate([[result.K[0, 0], result.K[1, 1], result.K[0, 2], result.K[1, 2]],
-                            [result.K[0, 1]] if result.skew else [], result.dist[dist_idx]])
-    poses = np.column_stack([result.rvecs, result.tvecs])
-    rs, Jis, Jes = problem.linearize(theta, poses)
-    A, Bs, Cs, _, _ = _normal_blocks(rs, Jis, Jes)
-    n, V = problem.n_intr, len(poses)
-    N = np.zeros((n + 6 * V, n + 6 * V))
-    N[:n, :n] = A
-    for v in range(V):
-        s = slice(n + 6 * v, n + 6 * v + 6)
-        N[:n, s] = Bs[v]
-        N[s, :n] = Bs[v].T
-        N[s, s] = Cs[v]
-    return result.sigma ** 2 * np.linalg.inv(N), n
+def _uncertainty_inputs(result):
+    """The normal-equation blocks and the intrinsics' covariance of a result (:mod:`dtscal_lib.covariance`)."""
+    return result.normal_blocks(), result.intrinsic_covariance()
 
 
 def _projection_jacobian(P: np.ndarray, K: np.ndarray, dist: np.ndarray, skew: bool, dist_idx):
@@ -334,8 +317,6 @@ def _projection_jacobian(P: np.ndarray, K: np.ndarray, dist: np.ndarray, skew: b
 
 def _rays(result, pix: np.ndarray) -> np.ndarray:
     """Unit rays (M, 3) of pixels; NaN where the distortion model cannot be inverted (far outside the data)."""
-    from .errors import DtscalError
-
     xy = pixel_to_normalized(pix, result.K)
     try:
         und = undistort_normalized(xy, result.dist)
@@ -360,47 +341,43 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     and a change of ``cx`` that a small rotation of every pose compensates moves no projection. So
     the point is mapped into every board frame with the solved poses, back with perturbed poses,
     averaged, and projected with perturbed intrinsics; the Jacobian of that with respect to all
-    parameters (intrinsics and every pose) is propagated through their joint covariance
-    ``sigma^2 (J^T J)^-1``.
+    parameters (intrinsics and every pose) is propagated through their joint covariance: the
+    intrinsics' honest one (``result.std_method``: at least the noise model's ``sigma^2 (J^T J)^-1``,
+    more when the views disagree) and each pose's given the intrinsics, block by block
+    (:func:`dtscal_lib.covariance.projection_covariance`): linear in the views, in time and memory.
 
     Parameters
     ----------
     result : CalibrationResult that carries its views
     pixels : (M, 2) float64 pixels
     distance : object-point unit (metres for the Duckietown board)
-    cov : optional precomputed full covariance (from :func:`_full_covariance`)
+    cov : optional ``(NormalBlocks, intrinsic covariance)`` computed before (:func:`_uncertainty_inputs`)
     """
-    from .calibration import _dist_indices
-
     _need_observations(result)
     pix = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-    C, n = _full_covariance(result) if cov is None else cov
+    blocks, cov_i = _uncertainty_inputs(result) if cov is None else cov
     if distance is None:
         distance = float(np.median(np.linalg.norm(result.tvecs, axis=1)))
     ray = _rays(result, pix)
     at_infinity = not np.isfinite(distance)
     P = ray if at_infinity else distance * ray
-    dist_idx = _dist_indices(result.model, fix_k3="k3" not in result.std)
-    _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew, dist_idx)
+    _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew, result.dist_indices)
     V = result.n_views
-    G = np.zeros((len(P), 2, C.shape[0]))
-    G[:, :, :n] = dqdI
-    h = 1e-6
-    for v in range(V):
-        R0 = cv2.Rodrigues(result.rvecs[v].reshape(3, 1))[0]
-        t0 = np.zeros(3) if at_infinity else result.tvecs[v]
-        Xb = (P - t0) @ R0  # the point in board v's frame: R0^T (P - t0)
-        for k in range(3):
-            dr = np.zeros(3)
-            dr[k] = h
-            dR = (cv2.Rodrigues((result.rvecs[v] + dr).reshape(3, 1))[0]
-                  - cv2.Rodrigues((result.rvecs[v] - dr).reshape(3, 1))[0]) / (2 * h)
-            dPdr = Xb @ dR.T / V  # the mean over boards moves by 1/V of board v's motion
-            G[:, :, n + 6 * v + k] = np.einsum("mij,mj->mi", dqdP, dPdr)
-        if not at_infinity:
-            G[:, :, n + 6 * v + 3: n + 6 * v + 6] = dqdP / V
-    GC = (G.reshape(-1, G.shape[2]) @ C).reshape(G.shape)
-    return np.einsum("mip,mjp->mij", GC, G)
+    R0, dR0 = rodrigues(result.rvecs)
+    t0 = np.zeros_like(result.tvecs) if at_infinity else np.asarray(result.tvecs, dtype=np.float64)
+
+    def dq_dpose(views: slice) -> np.ndarray:
+        # the point in board v's frame, Xb = R_v^T (P - t_v); the mean over the boards moves by 1/V of
+        # board v's motion: d mean / d r_k = dR_k Xb / V, d mean / d t = I / V
+        Xb = np.einsum("vji,vmj->vmi", R0[views], P[None] - t0[views][:, None])
+        dPdr = np.einsum("vkij,vmj->mvki", dR0[views], Xb) / V  # (M, c, 3 (k), 3)
+        G = np.empty((len(P), 2, dPdr.shape[1], 6))
+        G[:, :, :, :3] = np.einsum("mai,mvki->mavk", dqdP, dPdr)
+        G[:, :, :, 3:] = 0.0 if at_infinity else (dqdP / V)[:, :, None, :]
+        return G
+
+    with np.errstate(invalid="ignore"):  # NaN rays (a lens model that cannot be inverted) stay NaN
+        return projection_covariance(blocks, cov_i, dqdI, dq_dpose)
 
 
 def worst_direction_sigma(cov: np.ndarray) -> np.ndarray:
@@ -416,7 +393,7 @@ def uncertainty_map(result, *, step: int = 20, distance: float | None = None) ->
     v = np.arange(step / 2, h, step, dtype=float)
     corners = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
     grid = np.column_stack([np.tile(u, len(v)), np.repeat(v, len(u))])
-    cov = _full_covariance(result)
+    cov = _uncertainty_inputs(result)
     d = float(np.median(np.linalg.norm(result.tvecs, axis=1))) if distance is None else float(distance)
     s = worst_direction_sigma(projection_uncertainty(result, np.vstack([grid, corners]), distance=d, cov=cov))
     return UncertaintyMap(u, v, s[:-4].reshape(len(v), len(u)), corners, s[-4:], d)
@@ -432,9 +409,7 @@ def image_region(pixels, image_size) -> tuple[np.ndarray, np.ndarray]:
 # =========================================================================== checks
 def _board_axis_components(obj: np.ndarray, img: np.ndarray, res: np.ndarray) -> np.ndarray:
     """Residuals (N, 2) resolved along the board's x and y axes as seen in the image, in pixels."""
-    from .calibration import plane_homography
-
-    H = plane_homography(obj, img)
+    H = estimate_homography(obj, img)
     x = np.column_stack([obj, np.ones(len(obj))]) @ H.T
     wgt = x[:, 2]
     # d(pixel)/d(board) of the homography at each point
@@ -463,13 +438,9 @@ def _line_offsets(obj_list, img_list, res, noise) -> dict[tuple[int, int], dict[
 
 def _without_line(result, obj_list, img_list, axis: int, line: int):
     """Re-calibrate without one grid column/row; returns the fit and, per view, that line's mean offset."""
-    from .calibration import calibrate
-    from .errors import DtscalError
-
     keep = [grid_indices(o)[:, axis] != line for o in obj_list]
     try:
-        fit = calibrate([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)],
-                        result.image_size, model=result.model, skew=result.skew, fix_k3="k3" not in result.std)
+        fit = result.refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
     except (DtscalError, cv2.error, np.linalg.LinAlgError):  # e.g. too few points left in a view
         return None, None
     means = []
@@ -604,8 +575,6 @@ def assess(result, *, uncertainty: bool = True, distance: float | None = None) -
     uncertainty : also compute the projection-uncertainty map (a few hundred ms for 70 views)
     distance : distance of the fixed points of the uncertainty map (default: median board distance)
     """
-    from .calibration import board_normal_spread
-
     _need_observations(result)
     obj = [np.asarray(o, float)[:, :2] for o in result.object_points]
     img = [np.asarray(p, float).reshape(-1, 2) for p in result.image_points]
@@ -655,7 +624,7 @@ def assess(result, *, uncertainty: bool = True, distance: float | None = None) -
             "few_views", "doubtful",
             f"only {result.n_views} views: too few to tell a wrong view from the rest",
             f"collect at least {MIN_GOOD_VIEWS} (better 20 or more) views at different places and tilts"))
-    spread = board_normal_spread(result.rvecs)
+    spread = result.board_normal_spread()
     if spread < TILT_DOUBTFUL_DEG:
         findings.append(Finding(
             "parallel_views", "bad" if spread < TILT_BAD_DEG else "doubtful",
@@ -706,8 +675,6 @@ def monte_carlo_projection(result, pixels, *, runs: int = 50, distance: float | 
     frames, averaged over the boards) are projected with each run's intrinsics and poses. The
     spread over runs is what the uncertainty map predicts.
     """
-    from .calibration import calibrate
-
     _need_observations(result)
     rng = np.random.default_rng(seed)
     pix = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
@@ -719,11 +686,9 @@ def monte_carlo_projection(result, pixels, *, runs: int = 50, distance: float | 
     obj = [np.column_stack([np.asarray(o)[:, :2], np.zeros(len(o))]) for o in result.object_points]
     perfect = [project_points(o, r, t, result.K, result.dist) for o, r, t in zip(obj, result.rvecs, result.tvecs)]
     s = result.sigma if noise is None else noise
-    fix_k3 = "k3" not in result.std
     out = []
     for _ in range(runs):
-        rr = calibrate(obj, [p + rng.normal(0.0, s, p.shape) for p in perfect], result.image_size,
-                       model=result.model, skew=result.skew, fix_k3=fix_k3)
+        rr = result.refit(obj, [p + rng.normal(0.0, s, p.shape) for p in perfect])
         Pm = np.mean([X @ cv2.Rodrigues(r.reshape(3, 1))[0].T + t for X, r, t in zip(Xb, rr.rvecs, rr.tvecs)],
                      axis=0)
         out.append(project_points(Pm, np.zeros(3), np.zeros(3), rr.K, rr.dist))
