@@ -34,7 +34,7 @@ Pipeline, for ``V`` views of a planar target (any planar point set, any unit):
 6. **Uncertainty** (:mod:`dtscal_lib.covariance`): the noise model, the Hartley-Zisserman way,
    ``sigma^2 = |e|^2 / (2N - p)`` with ``e`` all residuals, ``N`` all points and ``p`` all
    estimated parameters, covariance ``sigma^2 (J^T J)^-1`` (OpenCV's ``stdDeviationsIntrinsics``:
-   ``std_noise_model``); and a jackknife over the views (leave one out, one Gauss-Newton step).
+   ``std_noise_model``); and a sandwich over the views (close to a leave-one-view-out jackknife).
    The reported standard deviations ``std`` come from the larger of the two in every direction: on
    real photographs, whose residuals are not independent noise, the noise model alone is 2-4x too
    small. Both through the Schur complement, linear in the views.
@@ -110,8 +110,8 @@ class CalibrationResult:
     std : standard deviation of every estimated intrinsic parameter, keyed
         ``fx, fy, cx, cy, [skew], k1, k2, [p1, p2, [k3]]``: how far it would move, 1 sigma, if the
         calibration were repeated with new views of the same kind. The larger of the corner-noise
-        model's and a jackknife over the views (:mod:`dtscal_lib.covariance`; ``std_method`` says
-        which applied), so residuals that are not independent noise make it larger, not wrong
+        model's and a sandwich over the views, close to a jackknife (:mod:`dtscal_lib.covariance`;
+        ``std_method`` says which applied): residuals that are not independent noise make it larger
     std_noise_model : the same from the noise model alone, ``sigma^2 (J^T J)^-1`` (OpenCV's
         ``stdDeviationsIntrinsics``)
     model : ``"plumb_bob"`` or ``"radial2"``
@@ -699,7 +699,7 @@ def _refine(problem: _Problem, theta, poses, max_iter: int = 200):
 def _intrinsic_covariance(problem: _Problem, theta, poses):
     """``sigma^2``, the intrinsics' honest covariance, the noise model's ``sigma^2 S^-1`` and the method in words.
 
-    See :mod:`dtscal_lib.covariance`: the larger of the noise model and a jackknife over the views.
+    See :mod:`dtscal_lib.covariance`: the larger of the noise model and a CR2 sandwich over the views.
     """
     blocks = problem.blocks(theta, poses)
     cov, noise, method = honest_intrinsic_covariance(blocks)

@@ -8,38 +8,44 @@ dense ``(n + 6V)^2`` matrix (1000 views would take 1.1 GB, 4000 views 18 GB).
 
 **What sigma means.** The standard deviation of a parameter says how far it would move if the
 calibration were repeated with new views of the same kind: 68 % of repetitions within 1 sigma.
-Two estimates of it:
+Three estimates of it, measured against each other (``benchmarks/bench_sigma.py``):
 
 * the **noise model** (Hartley-Zisserman, OpenCV's ``stdDeviationsIntrinsics``, mrcal): every
   corner coordinate has independent noise of the residual's sigma, so the covariance is
   ``sigma^2 (J^T J)^-1``, whose intrinsic block is ``sigma^2 S^-1`` with the Schur complement
-  ``S = A - sum_v B_v C_v^-1 B_v^T``. It is right when the residuals are that noise;
-* a **jackknife over views**: leave each view out, re-estimate, and measure how much the
-  intrinsics move: ``(V - 1) / V sum_v (d_v - mean d)(d_v - mean d)^T``. It assumes nothing about
-  the corners, only that the views are independent. Re-estimating V times is replaced by one
-  Gauss-Newton step from the solution: without view ``v`` the intrinsics move by
-  ``d_v = (S - S_v)^-1 g_v``, with ``S_v`` view ``v``'s share of ``S`` and ``g_v = Ji_v^T r_v`` its
-  share of the gradient (its pose gradient is 0 at the solution). On OpenCV's real sample photographs
-  (``data/real``, 13 views) that step agrees with 13 real re-calibrations to 0.5 % for fx, fy, cx, cy.
+  ``S = A - sum_v B_v C_v^-1 B_v^T``. Right when the residuals are that noise;
+* the **jackknife over views**: leave each view out, re-estimate, and measure how much the
+  intrinsics move: ``(V - 1) / V sum_v (d_v - mean d)(d_v - mean d)^T``. Without view ``v`` the
+  intrinsics move by ``d_v = (S - S_v)^-1 g_v`` (one Gauss-Newton step from the solution; ``S_v``
+  is view ``v``'s share of ``S``, ``g_v = Ji_v^T r_v`` its share of the gradient, its pose gradient
+  being 0 at the solution): on OpenCV's real photographs that step agrees with 13 real
+  re-calibrations to 0.5 %. It assumes only that the views are independent, but it overstates the
+  spread when each view weighs much (every view's removal is a large change): on synthetic views
+  with exactly Gaussian noise it is 2.5-3x the true spread of fx for 6 views, 1.2x for 13;
+* the **sandwich over views** with Bell and McCaffrey's leverage correction (CR2):
+  ``S^-1 (sum_v u_v u_v^T) S^-1`` with ``u_v = S^1/2 (S - S_v)^-1/2 g_v`` (half way, in the
+  exponent, between the plain sandwich and the jackknife above, which is the same with ``-1``). It
+  assumes only independent views and is close to unbiased when the noise model is right: 0.8-0.9x
+  the true spread for 6 views, 0.9-0.95x for 13 (40 and 25 noise draws).
 
-On those photographs the residuals are 1.7-2.0x the model-free corner noise (neighbouring corners
-share their error: the print, the lens and the detector leave a pattern the model does not absorb),
-and the noise model is 2-4x too small (sigma(cx) 0.41 px against a jackknife of 1.56 px); on the
-synthetic session (independent noise, the true lens model) the two agree within their own spread.
-Measured on both (``benchmarks/bench_sigma.py``):
+On OpenCV's real sample photographs (``data/real``, 13 views each) the residuals are 1.7-2.0x the
+model-free corner noise (neighbouring corners share their error: the print, the lens and the
+detector leave a pattern the model does not absorb), and the noise model is 2-4x too small:
 
-=================  ====================  =====================  ====================
- left (13 views)    noise model / jack    sandwich / jack        fit-to-noise x model
-=================  ====================  =====================  ====================
- fx, fy, cx, cy     0.56 0.58 0.26 0.45   0.82 0.83 0.96 0.94    1.15 1.19 0.54 0.91
-=================  ====================  =====================  ====================
+==========================  ======================  ======================  ===================
+ ratio to the jackknife      noise model             CR2 sandwich            fit/noise x model
+==========================  ======================  ======================  ===================
+ left: fx, fy, cx, cy        0.56 0.58 0.26 0.45     0.90 0.91 0.98 0.97     1.15 1.19 0.54 0.91
+ right: fx, fy, cx, cy       0.43 0.49 0.34 0.50     0.85 0.83 0.98 0.90     0.75 0.84 0.59 0.87
+==========================  ======================  ======================  ===================
 
-so the kit reports (:func:`honest_intrinsic_covariance`) the **larger of the two in every
-direction** (the noise model's covariance and the jackknife's, merged by their generalised
-eigenvalues): never less than the noise model, and as much as the views disagree. Below
-:data:`MIN_JACKKNIFE_VIEWS` views a jackknife is too noisy to mean anything and the noise model is
-used alone (the verdict then says the views are too few). The method in words travels with the
-result (``CalibrationResult.std_method``).
+(inflating the noise model by the ratio of the residual to the corner noise misses cx by 2x.)
+So the kit reports (:func:`honest_intrinsic_covariance`) the **larger of the noise model and the
+CR2 sandwich in every direction** (merged by their generalised eigenvalues): never less than the
+noise model, and as much as the views disagree. Below :data:`MIN_ROBUST_VIEWS` views the
+views cannot say how much they disagree and the noise model is used alone (the verdict then says
+the views are too few). The method in words travels with the result
+(``CalibrationResult.std_method``).
 
 The projection uncertainty (:func:`projection_covariance`) propagates the full covariance (the
 intrinsics' honest one and each pose's conditional ``sigma^2 C_v^-1``) through the Jacobian of a
@@ -53,13 +59,13 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["NormalBlocks", "honest_intrinsic_covariance", "projection_covariance", "rodrigues",
-           "MIN_JACKKNIFE_VIEWS", "METHOD_JACKKNIFE", "METHOD_NOISE_MODEL"]
+           "robust_intrinsic_covariance", "MIN_ROBUST_VIEWS", "METHOD_ROBUST", "METHOD_NOISE_MODEL"]
 
-#: fewer views than this: no jackknife (its own relative spread, about 1 / sqrt(2 (V - 1)), would
-#: exceed 30 %, and leaving one of 5 views out leaves too few to determine the lens)
-MIN_JACKKNIFE_VIEWS = 6
-METHOD_JACKKNIFE = ("the larger, in every direction, of the noise model's covariance sigma^2 (J^T J)^-1 and a "
-                    "jackknife over the {V} views (leave one view out, one Gauss-Newton step)")
+#: fewer views than this: the noise model alone (a spread over V views has V - 1 degrees of freedom;
+#: below 6 its own relative uncertainty, about 1 / sqrt(2 (V - 1)), exceeds 30 %)
+MIN_ROBUST_VIEWS = 6
+METHOD_ROBUST = ("the larger, in every direction, of the corner-noise model sigma^2 (J^T J)^-1 and a sandwich "
+                 "over the {V} views (Bell-McCaffrey CR2, close to a leave-one-view-out jackknife)")
 METHOD_NOISE_MODEL = ("the noise model's covariance sigma^2 (J^T J)^-1 only: {why}")
 #: views processed at once when a projection's Jacobian is propagated (bounds the memory, not the result)
 _VIEW_CHUNK = 128
@@ -117,34 +123,44 @@ def _psd_max(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
     return (T * np.maximum(lam, 1.0)) @ T.T
 
 
+def robust_intrinsic_covariance(blocks: NormalBlocks) -> np.ndarray | None:
+    """The CR2 sandwich over views (module docstring), (n, n); ``None`` when leaving a view out leaves
+    the intrinsics undetermined (one view alone determines part of the lens)."""
+    Sv = blocks.schur_views()
+    S = Sv.sum(axis=0)
+    w, U = np.linalg.eigh(0.5 * (S + S.T))
+    if w.min() <= 0:
+        return None
+    Li = (U / np.sqrt(w)) @ U.T  # S^-1/2
+    lam, Q = np.linalg.eigh(np.eye(len(S))[None] - Li[None] @ Sv @ Li[None])  # I - S^-1/2 S_v S^-1/2
+    if lam.min() <= 1e-9:
+        return None
+    u = np.einsum("vij,vj->vi", (Q / np.sqrt(lam)[:, None, :]) @ Q.transpose(0, 2, 1), blocks.g @ Li)
+    d = u @ Li  # (V, n): S^-1/2 (I - S^-1/2 S_v S^-1/2)^-1/2 S^-1/2 g_v
+    return d.T @ d
+
+
 def honest_intrinsic_covariance(blocks: NormalBlocks) -> tuple[np.ndarray, np.ndarray, str]:
     """``(covariance, noise-model covariance, method in words)`` of the intrinsics.
 
-    The covariance is the larger of the noise model's and the views' jackknife in every direction
-    (module docstring); with fewer than :data:`MIN_JACKKNIFE_VIEWS` views, or when leaving one view
+    The covariance is the larger of the noise model's and the views' CR2 sandwich in every direction
+    (module docstring); with fewer than :data:`MIN_ROBUST_VIEWS` views, or when leaving one view
     out leaves the intrinsics undetermined, the noise model's alone.
     """
-    Sv = blocks.schur_views()
-    S = Sv.sum(axis=0)
-    noise = blocks.sigma2 * np.linalg.inv(S)
+    noise = blocks.sigma2 * np.linalg.inv(blocks.schur())
     V = blocks.n_views
-    if V < MIN_JACKKNIFE_VIEWS:
+    if V < MIN_ROBUST_VIEWS:
         return noise, noise, METHOD_NOISE_MODEL.format(
-            why=f"{V} views are too few for a jackknife over views (at least {MIN_JACKKNIFE_VIEWS})")
-    try:
-        d = np.linalg.solve(S[None] - Sv, blocks.g[:, :, None])[:, :, 0]  # (V, n): d_v = (S - S_v)^-1 g_v
-    except np.linalg.LinAlgError:
-        d = None
-    if d is None or not np.all(np.isfinite(d)):
+            why=f"{V} views are too few to measure how much they disagree (at least {MIN_ROBUST_VIEWS})")
+    robust = robust_intrinsic_covariance(blocks)
+    if robust is None or not np.all(np.isfinite(robust)):
         return noise, noise, METHOD_NOISE_MODEL.format(
-            why="one view alone determines part of the lens, so a jackknife over views is undefined")
-    dm = d - d.mean(axis=0)
-    jack = (V - 1) / V * dm.T @ dm
+            why="one view alone determines part of the lens, so the views' disagreement cannot be measured")
     try:
-        cov = _psd_max(noise, jack)
+        cov = _psd_max(noise, robust)
     except np.linalg.LinAlgError:
         return noise, noise, METHOD_NOISE_MODEL.format(why="the noise model's covariance is singular")
-    return cov, noise, METHOD_JACKKNIFE.format(V=V)
+    return cov, noise, METHOD_ROBUST.format(V=V)
 
 
 def projection_covariance(blocks: NormalBlocks, cov_intrinsics: np.ndarray, dq_dintr: np.ndarray,

@@ -10,7 +10,7 @@ import pytest
 
 from dtscal_lib import camera, duckietown as dt, pipeline, quality
 from dtscal_lib.boards import DUCKIETOWN_BOARD
-from dtscal_lib.calibration import CalibrationResult, _dist_indices, _unpack, calibrate
+from dtscal_lib.calibration import CalibrationResult, calibrate
 from dtscal_lib.datasets import session_dir
 from dtscal_lib.errors import CalibrationError
 
@@ -136,6 +136,42 @@ def test_a_view_that_fits_far_worse_is_named():
     assert q.verdict in ("doubtful", "bad")
 
 
+def _dense_covariance(res):
+    """The full (n + 6V)^2 parameter covariance, written out densely (small V only): the intrinsics'
+    covariance ``Sigma`` with the poses following them, ``W Sigma W^T``, plus each pose's own
+    ``sigma^2 C_v^-1``. With the noise model's ``Sigma`` it is ``sigma^2 (J^T J)^-1`` exactly."""
+    b = res.normal_blocks()
+    n, V = len(b.A), b.n_views
+    W = np.zeros((n + 6 * V, n))
+    W[:n] = np.eye(n)
+    D = np.zeros((n + 6 * V, n + 6 * V))
+    for v in range(V):
+        s = slice(n + 6 * v, n + 6 * v + 6)
+        W[s] = -np.linalg.solve(b.C[v], b.B[v].T)
+        D[s, s] = b.sigma2 * np.linalg.inv(b.C[v])
+    return W @ res.intrinsic_covariance() @ W.T + D, n
+
+
+def test_the_block_covariance_is_the_dense_noise_model_when_the_views_agree():
+    """sigma^2 (J^T J)^-1 of the dense Jacobian, and the honest covariance never below it."""
+    rng = np.random.default_rng(12)
+    obj, img = _views(7, rng)
+    res = calibrate(obj, img, dt.IMAGE_SIZE)
+    b = res.normal_blocks()
+    n, V = len(b.A), b.n_views
+    N = np.zeros((n + 6 * V, n + 6 * V))
+    N[:n, :n] = b.A
+    for v in range(V):
+        s = slice(n + 6 * v, n + 6 * v + 6)
+        N[:n, s], N[s, :n], N[s, s] = b.B[v], b.B[v].T, b.C[v]
+    dense = b.sigma2 * np.linalg.inv(N)
+    names = list(res.std)
+    np.testing.assert_allclose([res.std_noise_model[k] for k in names], np.sqrt(np.diag(dense)[:n]), rtol=1e-8)
+    # the honest covariance minus the noise model's is positive semi-definite
+    assert np.linalg.eigvalsh(res.intrinsic_covariance() - dense[:n, :n]).min() > -1e-9 * dense[:n, :n].max()
+    assert "sandwich over the 7 views" in res.std_method
+
+
 @pytest.mark.parametrize("skew,fix_k3", [(True, True), (False, False)])
 def test_projection_jacobian_matches_finite_differences(skew, fix_k3):
     """The propagated covariance is J C J^T with J of the mean-over-boards projection, checked numerically."""
@@ -143,18 +179,19 @@ def test_projection_jacobian_matches_finite_differences(skew, fix_k3):
     obj, img = _views(8, rng)
     res = calibrate(obj, img, dt.IMAGE_SIZE, skew=skew, fix_k3=fix_k3)
     pix = np.array([[0.0, 0.0], [320.0, 240.0], [600.0, 60.0]])
-    C, n = quality._full_covariance(res)
+    C, n = _dense_covariance(res)
     d = 0.4
     ray = camera.undistort_normalized(camera.pixel_to_normalized(pix, res.K), res.dist)
     ray = np.column_stack([ray, np.ones(len(ray))])
     P = d * ray / np.linalg.norm(ray, axis=1, keepdims=True)
     Xb = [(P - t) @ cv2.Rodrigues(r.reshape(3, 1))[0] for r, t in zip(res.rvecs, res.tvecs)]
-    di = _dist_indices(res.model, fix_k3)
-    x0 = np.concatenate([[res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]], [res.K[0, 1]] if skew else [],
-                         res.dist[di], np.column_stack([res.rvecs, res.tvecs]).ravel()])
+    di = res.dist_indices
+    x0 = np.concatenate([res.intrinsic_vector(), np.column_stack([res.rvecs, res.tvecs]).ravel()])
 
     def f(x):
-        K, dist = _unpack(x[:n], skew, di)
+        K = np.array([[x[0], x[4] if skew else 0.0, x[2]], [0.0, x[1], x[3]], [0.0, 0.0, 1.0]])
+        dist = np.zeros(5)
+        dist[di] = x[4 + int(skew):n]
         ps = x[n:].reshape(-1, 6)
         Pm = np.mean([X @ cv2.Rodrigues(p[:3].reshape(3, 1))[0].T + p[3:] for X, p in zip(Xb, ps)], axis=0)
         return camera.project_points(Pm, np.zeros(3), np.zeros(3), K, dist).ravel()
