@@ -185,11 +185,16 @@ def projection_covariance(blocks: NormalBlocks, cov_intrinsics: np.ndarray, dq_d
     Cinv = np.linalg.inv(blocks.C)
     GW = np.array(dq_dintr, dtype=np.float64, copy=True)
     pose_part = np.zeros((M, 2, 2))
+    n = K.shape[2]
     for start in range(0, blocks.n_views, _VIEW_CHUNK):
         sl = slice(start, min(start + _VIEW_CHUNK, blocks.n_views))
-        Gv = dq_dpose(sl)
-        GW -= np.einsum("mavk,vkn->man", Gv, K[sl])
-        pose_part += np.einsum("mavk,vkl,mbvl->mab", Gv, Cinv[sl], Gv)
+        Gv = dq_dpose(sl)  # (M, 2, c, 6)
+        c = Gv.shape[2]
+        flat = Gv.reshape(M * 2, c * 6)
+        GW -= (flat @ K[sl].reshape(c * 6, n)).reshape(M, 2, n)
+        GC = np.matmul(Gv.transpose(2, 0, 1, 3).reshape(c, M * 2, 6), Cinv[sl])  # (c, 2M, 6): G_v C_v^-1
+        GC = GC.reshape(c, M, 2, 6).transpose(1, 2, 0, 3).reshape(M, 2, c * 6)
+        pose_part += np.matmul(GC, Gv.reshape(M, 2, c * 6).transpose(0, 2, 1))
     return np.einsum("man,nk,mbk->mab", GW, cov_intrinsics, GW) + blocks.sigma2 * pose_part
 
 

@@ -59,7 +59,6 @@ import numpy as np
 from .camera import pixel_to_normalized, project_points, undistort_normalized
 from .covariance import projection_covariance, rodrigues
 from .errors import CalibrationError, DtscalError
-from .homography import estimate_homography
 
 __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "residuals", "grid_indices",
            "projection_uncertainty", "image_region", "REGION_NAMES"]
@@ -223,8 +222,21 @@ class Quality:
 def residuals(result) -> list[np.ndarray]:
     """Per view (N_i, 2) ``projected - observed`` pixels of a result that carries its observations."""
     _need_observations(result)
-    return [project_points(np.column_stack([o, np.zeros(len(o))]), r, t, result.K, result.dist) - p
-            for o, p, r, t in zip(result.object_points, result.image_points, result.rvecs, result.tvecs)]
+    return residuals_of(result, result.object_points, result.image_points)
+
+
+def residuals_of(fit, obj_list, img_list) -> list[np.ndarray]:
+    """Per view (N_i, 2) ``projected - observed`` pixels of board points ``obj_list`` seen at ``img_list``
+    through a fit's camera and poses (all views in one projection; skew honoured)."""
+    counts = [len(o) for o in obj_list]
+    view = np.repeat(np.arange(len(obj_list)), counts)
+    xy = np.concatenate([np.asarray(o, dtype=np.float64)[:, :2] for o in obj_list])
+    R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
+    Rv = R[view]
+    P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
+    q = project_points(P, np.zeros(3), np.zeros(3), fit.K, fit.dist)
+    obs = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in img_list])
+    return np.split(q - obs, np.cumsum(counts)[:-1])
 
 
 def _need_observations(result) -> None:
@@ -256,18 +268,28 @@ _RING_W = np.linalg.pinv(np.column_stack([np.ones(8), _RING[:, 0], _RING[:, 1], 
 _RING_GAIN = float(np.sqrt(1.0 + (_RING_W ** 2).sum()))  # std of (observed - predicted) / sigma
 
 
-def _prediction_errors(obj: np.ndarray, img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Errors (M, 2) of interior corners against the quadratic through their 8 neighbours, and their indices."""
-    g = grid_indices(obj)
+def _grid_groups(object_points) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Views that show the same points of the same grid, so that their checks run on stacked arrays.
+
+    Returns ``[(views, obj (N, 2), grid (N, 2) int)]``, every view in exactly one group.
+    """
+    groups: dict[bytes, list] = {}
+    for v, o in enumerate(object_points):
+        o = np.ascontiguousarray(np.asarray(o, dtype=np.float64)[:, :2])
+        groups.setdefault(o.tobytes() + bytes(str(o.shape), "ascii"), [o, []])[1].append(v)
+    return [(np.asarray(views), o, grid_indices(o)) for o, views in groups.values()]
+
+
+def _ring_neighbours(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Interior corners of a grid (all 8 neighbours present): their indices (M,) and the neighbours' (M, 8)."""
     lookup = {(int(c), int(r)): i for i, (c, r) in enumerate(g)}
-    errs, idx = [], []
+    idx, nbs = [], []
     for i, (c, r) in enumerate(g):
         nb = [lookup.get((int(c + dc), int(r + dr))) for dc, dr in _RING.astype(int)]
-        if any(n is None for n in nb):
-            continue
-        errs.append(img[i] - _RING_W @ img[nb])
-        idx.append(i)
-    return np.reshape(errs, (-1, 2)), np.asarray(idx, dtype=int)
+        if all(n is not None for n in nb):
+            idx.append(i)
+            nbs.append(nb)
+    return np.asarray(idx, dtype=int), np.asarray(nbs, dtype=int).reshape(-1, 8)
 
 
 def corner_noise(object_points, image_points) -> tuple[float, int]:
@@ -278,8 +300,12 @@ def corner_noise(object_points, image_points) -> tuple[float, int]:
     ``g = sqrt(1 + sum w^2)`` the prediction's noise gain, so a few corners pulled off by clutter do
     not inflate it. Returns ``(nan, 0)`` when no view has an interior corner.
     """
-    errs = [_prediction_errors(np.asarray(o, float)[:, :2], np.asarray(p, float).reshape(-1, 2))[0]
-            for o, p in zip(object_points, image_points)]
+    errs = []
+    for views, _, g in _grid_groups(object_points):
+        idx, nb = _ring_neighbours(g)
+        if len(idx):
+            p = np.stack([np.asarray(image_points[v], dtype=np.float64).reshape(-1, 2) for v in views])
+            errs.append((p[:, idx] - np.einsum("k,vmkc->vmc", _RING_W, p[:, nb])).reshape(-1, 2))
     e = np.concatenate(errs) if errs else np.zeros((0, 2))
     if len(e) == 0:
         return float("nan"), 0
@@ -369,10 +395,13 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     def dq_dpose(views: slice) -> np.ndarray:
         # the point in board v's frame, Xb = R_v^T (P - t_v); the mean over the boards moves by 1/V of
         # board v's motion: d mean / d r_k = dR_k Xb / V, d mean / d t = I / V
-        Xb = np.einsum("vji,vmj->vmi", R0[views], P[None] - t0[views][:, None])
-        dPdr = np.einsum("vkij,vmj->mvki", dR0[views], Xb) / V  # (M, c, 3 (k), 3)
-        G = np.empty((len(P), 2, dPdr.shape[1], 6))
-        G[:, :, :, :3] = np.einsum("mai,mvki->mavk", dqdP, dPdr)
+        R, dR = R0[views], dR0[views]
+        c, m = len(R), len(P)
+        Xb = np.matmul(P[None] - t0[views][:, None], R)  # (c, M, 3): rows R^T (P - t)
+        dPdr = np.matmul(dR.reshape(c, 9, 3), Xb.transpose(0, 2, 1)) / V  # (c, 3k x 3i, M)
+        dPdr = dPdr.reshape(c * 3, 3, m).transpose(2, 1, 0)  # (M, 3i, c x 3k)
+        G = np.empty((m, 2, c, 6))
+        G[:, :, :, :3] = np.matmul(dqdP, dPdr).reshape(m, 2, c, 3)
         G[:, :, :, 3:] = 0.0 if at_infinity else (dqdP / V)[:, :, None, :]
         return G
 
@@ -407,32 +436,50 @@ def image_region(pixels, image_size) -> tuple[np.ndarray, np.ndarray]:
 
 
 # =========================================================================== checks
-def _board_axis_components(obj: np.ndarray, img: np.ndarray, res: np.ndarray) -> np.ndarray:
-    """Residuals (N, 2) resolved along the board's x and y axes as seen in the image, in pixels."""
-    H = estimate_homography(obj, img)
-    x = np.column_stack([obj, np.ones(len(obj))]) @ H.T
-    wgt = x[:, 2]
-    # d(pixel)/d(board) of the homography at each point
-    J = np.empty((len(obj), 2, 2))
-    for k in range(2):
-        J[:, :, k] = (H[:2, k][None, :] * wgt[:, None] - x[:, :2] * H[2, k]) / wgt[:, None] ** 2
-    b = np.linalg.solve(J, res[:, :, None])[:, :, 0]  # board-plane displacement
-    return b * np.linalg.norm(J, axis=1)  # back to pixels along each axis
+def _board_axis_jacobians(fit, obj_list) -> list[np.ndarray]:
+    """Per view (N_i, 2, 2) ``d pixel / d (board x, board y)`` at each board point, through the fitted camera."""
+    counts = [len(o) for o in obj_list]
+    view = np.repeat(np.arange(len(obj_list)), counts)
+    xy = np.concatenate([np.asarray(o, dtype=np.float64)[:, :2] for o in obj_list])
+    R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
+    Rv = R[view]
+    P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
+    _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, fit.dist_indices)
+    return np.split(np.matmul(dqdP, Rv[:, :, :2]), np.cumsum(counts)[:-1])
 
 
-def _line_offsets(obj_list, img_list, res, noise) -> dict[tuple[int, int], dict[int, float]]:
-    """``{(axis, line): {view: mean offset px}}`` for the grid columns (axis 0) and rows (axis 1) whose
-    residuals along the board's axis share one offset in at least ``OFFSET_VIEW_SHARE`` of the views."""
-    offsets: dict[tuple[int, int], dict[int, float]] = {}
-    for v, (o, p, e) in enumerate(zip(obj_list, img_list, res)):
-        g = grid_indices(o)
-        comp = _board_axis_components(o, p, e)
+def _board_axis_components(J: np.ndarray, res: np.ndarray) -> np.ndarray:
+    """Residuals (..., 2) resolved along the board's x and y axes as seen in the image, in pixels.
+
+    ``J`` (..., 2, 2) is ``d pixel / d board`` at each point (:func:`_board_axis_jacobians`).
+    """
+    b = np.linalg.solve(J, res[..., None])[..., 0]  # board-plane displacement
+    return b * np.linalg.norm(J, axis=-2)  # back to pixels along each axis
+
+
+def _line_means(obj_list, comps):
+    """``{(axis, line): (views, mean offsets, points on the line)}``: per grid column (axis 0) / row (axis 1),
+    the mean of the board-axis residual components of its corners in each view (stacked per grid)."""
+    out: dict[tuple[int, int], list] = {}
+    for views, _, g in _grid_groups(obj_list):
+        c = np.stack([comps[v] for v in views])  # (G, N, 2)
         for axis in (0, 1):
             for line in np.unique(g[:, axis]):
                 sel = g[:, axis] == line
-                m = float(comp[sel, axis].mean())
-                if abs(m) > max(OFFSET_Z * noise / np.sqrt(sel.sum()), noise):
-                    offsets.setdefault((axis, int(line)), {})[v] = m
+                out.setdefault((axis, int(line)), []).append((views, c[:, sel, axis].mean(axis=1), int(sel.sum())))
+    return out
+
+
+def _line_offsets(fit, obj_list, res, noise) -> dict[tuple[int, int], dict[int, float]]:
+    """``{(axis, line): {view: mean offset px}}`` for the grid columns (axis 0) and rows (axis 1) whose
+    residuals along the board's axis share one offset in at least ``OFFSET_VIEW_SHARE`` of the views."""
+    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list), res)]
+    offsets: dict[tuple[int, int], dict[int, float]] = {}
+    for key, parts in _line_means(obj_list, comps).items():
+        for views, m, count in parts:
+            hit = np.abs(m) > max(OFFSET_Z * noise / np.sqrt(count), noise)
+            for v, val in zip(views[hit], m[hit]):
+                offsets.setdefault(key, {})[int(v)] = float(val)
     return {k: d for k, d in offsets.items() if len(d) >= max(2, OFFSET_VIEW_SHARE * len(res))}
 
 
@@ -443,12 +490,10 @@ def _without_line(result, obj_list, img_list, axis: int, line: int):
         fit = result.refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
     except (DtscalError, cv2.error, np.linalg.LinAlgError):  # e.g. too few points left in a view
         return None, None
-    means = []
-    for o, p, k, r, t in zip(obj_list, img_list, keep, fit.rvecs, fit.tvecs):
-        o3 = np.column_stack([o, np.zeros(len(o))])
-        e = project_points(o3, r, t, fit.K, fit.dist) - p
-        means.append(float(_board_axis_components(o, p, e)[~k, axis].mean()))
-    return fit, np.array(means)
+    res = residuals_of(fit, obj_list, img_list)
+    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list), res)]
+    means = np.array([float(c[~k, axis].mean()) for c, k in zip(comps, keep)])
+    return fit, means
 
 
 def _offset_findings(result, obj_list, img_list, res, noise, rounds: int = 2) -> list[Finding]:
@@ -462,7 +507,7 @@ def _offset_findings(result, obj_list, img_list, res, noise, rounds: int = 2) ->
     out = []
     names = ("column", "row")
     for _ in range(rounds):
-        flagged = _line_offsets(obj_list, img_list, res, noise)
+        flagged = _line_offsets(result, obj_list, res, noise)
         if not flagged:
             break
         size = {k: float(np.median(np.abs(list(d.values())))) for k, d in flagged.items()}
@@ -504,8 +549,7 @@ def _offset_findings(result, obj_list, img_list, res, noise, rounds: int = 2) ->
         keep = [grid_indices(o)[:, axis] != line for o in obj_list]
         obj_list = [o[k] for o, k in zip(obj_list, keep)]
         img_list = [p[k] for p, k in zip(img_list, keep)]
-        res = [project_points(np.column_stack([o, np.zeros(len(o))]), r, t, fit.K, fit.dist) - p
-               for o, p, r, t in zip(obj_list, img_list, fit.rvecs, fit.tvecs)]
+        res = residuals_of(fit, obj_list, img_list)
         result = fit
     return out
 
@@ -549,15 +593,15 @@ def _richer_model(result) -> str:
 def _neighbour_correlation(obj_list, res) -> float:
     """Mean normalised dot product of the residual vectors of grid-neighbouring corners (0 for noise)."""
     num = den = 0.0
-    for o, e in zip(obj_list, res):
-        g = grid_indices(o)
+    for views, _, g in _grid_groups(obj_list):
+        e = np.stack([res[v] for v in views])  # (G, N, 2)
         lookup = {(int(a), int(b)): i for i, (a, b) in enumerate(g)}
-        for i, (a, b) in enumerate(g):
-            for da, db in ((1, 0), (0, 1)):
-                j = lookup.get((int(a + da), int(b + db)))
-                if j is not None:
-                    num += float(e[i] @ e[j])
-                    den += 0.5 * float(e[i] @ e[i] + e[j] @ e[j])
+        pairs = np.array([(i, j) for i, (a, b) in enumerate(g) for da, db in ((1, 0), (0, 1))
+                          if (j := lookup.get((int(a + da), int(b + db)))) is not None], dtype=int).reshape(-1, 2)
+        if len(pairs):
+            ei, ej = e[:, pairs[:, 0]], e[:, pairs[:, 1]]
+            num += float(np.einsum("vpc,vpc->", ei, ej))
+            den += 0.5 * float(np.einsum("vpc,vpc->", ei, ei) + np.einsum("vpc,vpc->", ej, ej))
     return num / den if den > 0 else 0.0
 
 
