@@ -61,7 +61,7 @@ from .covariance import projection_covariance, rodrigues
 from .errors import CalibrationError, DtscalError
 
 __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "residuals", "grid_indices",
-           "projection_uncertainty", "image_region", "REGION_NAMES"]
+           "projection_uncertainty", "image_region", "consequences", "explain", "REGION_NAMES"]
 
 #: no detector measures corners of an 8-bit image much better than this (pixels, per coordinate);
 #: the noise used in the ratios never goes below it (exact synthetic points would divide by 0)
@@ -88,6 +88,16 @@ TILT_BAD_DEG, TILT_DOUBTFUL_DEG = 10.0, 20.0
 #: mean 1-sigma projection uncertainty at the image corners, pixels: above the first doubtful, the second bad
 #: (the image corners are extrapolated: no board corner is ever detected there)
 CORNER_SIGMA_DOUBTFUL, CORNER_SIGMA_BAD = 1.0, 4.0
+
+#: a Duckiebot's camera over the ground, as the shipped default extrinsic homography says it is
+#: (duckietown.md's ``camera_extrinsic/default.yaml`` with the default P, read back through
+#: :func:`dtscal_lib.ground.camera_pose_from_homography`: 0.1016 m above the ground, 25.3 degrees below
+#: the horizon, 0.079 m ahead of the wheel axle; checked in the tests). Metres and degrees, robot frame
+#: (x forward, y left, z up).
+NOMINAL_CAMERA_HEIGHT_M, NOMINAL_CAMERA_PITCH_DEG, NOMINAL_CAMERA_X_M = 0.10, 25.0, 0.08
+#: where the consequences are stated: ground points this far ahead of the axle (metres); a lane
+#: follower looks at markings between the two
+CONSEQUENCE_DISTANCES_M = (0.30, 0.60)
 
 REGION_NAMES = (("top-left", "top", "top-right"), ("left", "centre", "right"),
                 ("bottom-left", "bottom", "bottom-right"))
@@ -177,6 +187,28 @@ class Quality:
     tilt_spread_deg: float
     #: the report page when one was written (:func:`dtscal_lib.report.quality_for_run`)
     report_path: object = None
+    #: what the calibration means for a Duckiebot (:func:`consequences`); None without the uncertainty
+    consequences: dict | None = None
+
+    def meaning(self) -> str:
+        """The verdict and its consequences for a robot, in words a student can act on."""
+        return explain(self)
+
+    def summary_lines(self, sigma_method: str = "", width: int = 100) -> list[str]:
+        """What the command line prints under the parameters: how sigma was computed, the consequences
+        for a Duckiebot (one line) and :meth:`meaning` wrapped, each line indented by two spaces."""
+        import textwrap
+
+        out = [f"  +- is 1 sigma: {sigma_method}"] if sigma_method else []
+        c = self.consequences
+        if c:
+            g = [f"{100 * r['ahead_m']:.0f} cm ahead +-{r['ground_sigma_cm']:.2g} cm" for r in c["ground"]
+                 if r["ground_sigma_cm"] is not None]
+            corner = "n/a" if c["corner_sigma_px"] is None else f"+-{c['corner_sigma_px']:.2f} px"
+            out.append(f"  on a Duckiebot: ground point {', '.join(g) or 'outside the image'}; image corners {corner} "
+                       f"(1 sigma, each known to +-{100 * c['relative_uncertainty']:.0f} %)")
+        out += textwrap.wrap(self.meaning(), width, initial_indent="  ", subsequent_indent="  ")
+        return out
 
     @property
     def noise_model(self) -> str:
@@ -215,6 +247,8 @@ class Quality:
                 "worst_region": u.worst_region(),
             },
             "more_data_where": self.help_region,
+            "consequences": self.consequences,
+            "meaning": self.meaning(),
         }
 
 
@@ -705,8 +739,114 @@ def assess(result, *, uncertainty: bool = True, distance: float | None = None) -
             f"hold the board next in the {help_region} of the image (filling it, tilted), where the uncertainty "
             "is largest"))
     verdict = max((f.severity for f in findings), key=_SEVERITY.__getitem__, default="good")
+    cons = None
+    if umap is not None:
+        try:
+            cons = consequences(result, umap=umap)
+        except (np.linalg.LinAlgError, DtscalError):
+            cons = None
     return Quality(verdict, findings, float(noise), n_noise, float(result.sigma), pv, res, umap, counts,
-                   help_region, spread)
+                   help_region, spread, consequences=cons)
+
+
+# =========================================================================== what it means for a robot
+def _nominal_camera() -> tuple[np.ndarray, np.ndarray]:
+    """Rotation robot -> camera (3, 3) and camera centre (3,) of the nominal Duckiebot mounting."""
+    th = np.radians(NOMINAL_CAMERA_PITCH_DEG)
+    z = np.array([np.cos(th), 0.0, -np.sin(th)])  # optical axis, looking forward and down
+    x = np.array([0.0, -1.0, 0.0])  # image right = robot's right
+    return np.array([x, np.cross(z, x), z]), np.array([NOMINAL_CAMERA_X_M, 0.0, NOMINAL_CAMERA_HEIGHT_M])
+
+
+def _pixel_to_ground(result, pix: np.ndarray) -> np.ndarray:
+    """Ground points (M, 2) metres, robot frame, seen at ``pix`` through the nominal mounting."""
+    R, c = _nominal_camera()
+    d = _rays(result, pix) @ R  # ray directions in the robot frame
+    return c[:2] + d[:, :2] * (-c[2] / d[:, 2:3])
+
+
+def consequences(result, *, umap: UncertaintyMap | None = None, cov=None) -> dict:
+    """What the calibration's uncertainty means for a Duckiebot's ground projection and image corners.
+
+    The camera is put where a Duckiebot's is (:data:`NOMINAL_CAMERA_HEIGHT_M` above the ground,
+    :data:`NOMINAL_CAMERA_PITCH_DEG` down, held fixed: only the intrinsics are in doubt). For each
+    distance of :data:`CONSEQUENCE_DISTANCES_M` ahead of the axle, the ground point there is seen at a
+    pixel; that pixel's 1-sigma projection uncertainty (:func:`projection_uncertainty`, the honest
+    covariance) is carried onto the ground through the mounting: ``ground_sigma_cm`` (worst direction)
+    and ``forward_sigma_cm`` (along the robot's x). ``corner_sigma_px`` is the mean 1-sigma at the four
+    image corners. ``relative_uncertainty`` is how uncertain these figures are themselves: a spread
+    measured over V views is known to about ``1 / sqrt(2 (V - 1))`` of itself.
+    """
+    w, h = result.image_size
+    Rc, c = _nominal_camera()
+    cov = _uncertainty_inputs(result) if cov is None else cov
+    out = []
+    for x in CONSEQUENCE_DISTANCES_M:
+        Pc = Rc @ (np.array([x, 0.0, 0.0]) - c)
+        q = project_points(Pc[None], np.zeros(3), np.zeros(3), result.K, result.dist)[0]
+        row = {"ahead_m": float(x), "pixel": [float(q[0]), float(q[1])],
+               "in_image": bool(0 <= q[0] < w and 0 <= q[1] < h),
+               "pixel_sigma_px": None, "ground_sigma_cm": None, "forward_sigma_cm": None}
+        if row["in_image"]:
+            Sq = projection_uncertainty(result, q[None], distance=float(np.linalg.norm(Pc)), cov=cov)[0]
+            eps = 0.5
+            J = np.column_stack([(_pixel_to_ground(result, (q + e)[None]) - _pixel_to_ground(result, (q - e)[None]))[0]
+                                 / (2 * eps) for e in (np.array([eps, 0.0]), np.array([0.0, eps]))])
+            Sg = J @ Sq @ J.T
+            if np.all(np.isfinite(Sg)):
+                row.update(pixel_sigma_px=float(worst_direction_sigma(Sq)),
+                           ground_sigma_cm=100.0 * float(worst_direction_sigma(Sg)),
+                           forward_sigma_cm=100.0 * float(np.sqrt(Sg[0, 0])))
+        out.append(row)
+    corner = None if umap is None or np.isnan(umap.corner_mean) else float(umap.corner_mean)
+    return {"mounting": {"height_m": NOMINAL_CAMERA_HEIGHT_M, "pitch_down_deg": NOMINAL_CAMERA_PITCH_DEG,
+                         "ahead_of_axle_m": NOMINAL_CAMERA_X_M},
+            "ground": out, "corner_sigma_px": corner,
+            "relative_uncertainty": float(1.0 / np.sqrt(2.0 * max(result.n_views - 1, 1))),
+            "sigma_method": getattr(result, "std_method", "")}
+
+
+_VERDICT_WORDS = {
+    "good": "good: the model explains the corners down to their noise, and the data pin the camera down.",
+    "doubtful": "doubtful: usable, but something in the data or the model is not what the noise model assumes "
+                "(the findings say what); the uncertainties stated here include it.",
+    "bad": "bad: do not use this calibration on a robot; the findings say what to change.",
+}
+
+
+def explain(q: Quality) -> str:
+    """The verdict, why, and what it means for a Duckiebot, as a few sentences (:meth:`Quality.meaning`)."""
+    lines = [f"Verdict {_VERDICT_WORDS[q.verdict]}"]
+    codes = {f.code for f in q.findings}
+    if "fit" in codes:
+        ratio = q.fit_sigma / max(q.noise_sigma, NOISE_FLOOR_PX)
+        lines.append(
+            f"The residuals are {ratio:.1f}x the corner noise measured in these very images: part of every residual "
+            "is not noise but a pattern shared by neighbouring corners (a print that is not flat, a lens the "
+            "model cannot follow exactly, corners pulled the same way). More views of the same kind do not average "
+            "it away; the standard deviations are therefore measured from how much the views disagree with each "
+            "other, not from the noise alone.")
+    c = q.consequences
+    if c:
+        m = c["mounting"]
+        parts = []
+        for g in c["ground"]:
+            if g["ground_sigma_cm"] is None:
+                parts.append(f"{100 * g['ahead_m']:.0f} cm ahead is outside this camera's image")
+            else:
+                parts.append(f"a point {100 * g['ahead_m']:.0f} cm ahead is placed within "
+                             f"+-{g['ground_sigma_cm']:.2g} cm (1 sigma; {g['pixel_sigma_px']:.2g} px in the image)")
+        rel = 100 * c["relative_uncertainty"]
+        corner = ("cannot be stated (the lens model folds over there)" if c["corner_sigma_px"] is None
+                  else f"is uncertain by {c['corner_sigma_px']:.2f} px (1 sigma)")
+        lines.append(
+            f"On a Duckiebot (camera {100 * m['height_m']:.0f} cm above the ground, {m['pitch_down_deg']:.0f} degrees "
+            f"down), ground projection through these intrinsics: {'; '.join(parts)}. A pixel at the image corners "
+            f"{corner}. These figures are themselves known to about +-{rel:.0f} % (from {q.per_view_rms.size} views). "
+            "Lane detection projects the pixels of the road's markings onto the ground, so a pixel's error becomes "
+            "centimetres that grow with the distance; the extrapolated image corners are where a lane marking seen "
+            "at the side of the image is placed worst, and where more views (boards held there) help most.")
+    return " ".join(lines)
 
 
 def monte_carlo_projection(result, pixels, *, runs: int = 50, distance: float | None = None, seed: int = 0,
