@@ -91,6 +91,10 @@ MAX_RELATIVE_FOCAL_STD = 0.25
 OBJECT_EXTENT_RANGE = (1e-6, 1e6)
 #: image points may lie this fraction of the image size outside it (a detector never does)
 IMAGE_SLACK = 0.25
+#: most corners (over all views) one calibration takes: calibration and its verdict each need about
+#: 1.1 kB per corner (benchmarks/bench_memory.py: 4000 views x 35 corners, +148 MB and +151 MB), so this
+#: keeps either near 1 GB; more views than that add nothing a subset would not give
+MAX_POINTS = 1_000_000
 
 
 # =========================================================================== result
@@ -742,6 +746,21 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
     if model == "radial2" and not fix_k3:
         raise CalibrationError("model 'radial2' estimates k1 and k2 only; use model='plumb_bob' to estimate k3")
     obj, img, size = _check_views(object_points, image_points, image_size)
+    n_points = sum(len(p) for p in img)
+    if n_points > MAX_POINTS:
+        raise CalibrationError(
+            f"{len(img)} views with {n_points} corners are more than one calibration takes ({MAX_POINTS}: about "
+            f"{MAX_POINTS * 1.1e-6:.1f} GB of memory); calibrate a subset, e.g. one view in "
+            f"{-(-n_points // MAX_POINTS)}")
+    try:
+        return _calibrate(obj, img, size, model, skew, fix_k3, initial)
+    except MemoryError:
+        raise CalibrationError(
+            f"not enough memory to calibrate {len(img)} views ({n_points} corners, about {n_points * 1.1e-6:.2f} GB "
+            "needed); calibrate fewer views or free memory") from None
+
+
+def _calibrate(obj, img, size, model: str, skew: bool, fix_k3: bool, initial) -> CalibrationResult:
     dist_idx = _dist_indices(model, fix_k3)
     n_res = 2 * sum(len(p) for p in img)
     n_par = 4 + int(skew) + len(dist_idx) + 6 * len(img)

@@ -260,3 +260,26 @@ def test_a_lens_model_that_folds_over_at_the_image_corners_is_bad_not_a_crash():
     d = json.loads(json.dumps(q.to_dict()))  # NaN never reaches the JSON
     assert d["projection_uncertainty"]["corner_sigma_px"] is None
     assert 0 < d["projection_uncertainty"]["unprojectable_share"] < 1
+
+
+def test_too_many_views_or_too_little_memory_is_a_clear_error_not_a_traceback(monkeypatch):
+    """Calibration and verdict are linear in the views; past MAX_POINTS corners, or when numpy cannot get
+    the memory (its ArrayMemoryError is a MemoryError), the user gets a CalibrationError saying what to do."""
+    from dtscal_lib import calibration
+
+    obj, img = _views(8, np.random.default_rng(21))
+    monkeypatch.setattr(calibration, "MAX_POINTS", 7 * 35)
+    with pytest.raises(CalibrationError, match="more than one calibration takes .* one view in 2"):
+        calibrate(obj, img, dt.IMAGE_SIZE)
+    monkeypatch.undo()
+    res = calibrate(obj, img, dt.IMAGE_SIZE)
+
+    def no_memory(*a, **k):
+        raise np._core._exceptions._ArrayMemoryError((10 ** 6, 10 ** 6), np.dtype(float))
+
+    monkeypatch.setattr(calibration, "_calibrate", no_memory)
+    with pytest.raises(CalibrationError, match="not enough memory to calibrate 8 views"):
+        calibrate(obj, img, dt.IMAGE_SIZE)
+    monkeypatch.setattr(quality, "_assess", no_memory)
+    with pytest.raises(CalibrationError, match="not enough memory to judge a calibration of 8 views"):
+        res.quality()
