@@ -620,8 +620,14 @@ class _Problem:
         """The normal equations at ``(theta, poses)`` block by block, with each view's share (``O(V)`` memory)."""
         r, Ji, Je = self.linearize_stacked(theta, poses)
         A, Bs, Cs, _, _ = self.normal_blocks(r, Ji, Je)
-        A_views = np.add.reduceat(np.einsum("pai,paj->pij", Ji, Ji), self.starts, axis=0)
-        g = np.add.reduceat(np.einsum("pai,pa->pi", Ji, r), self.starts, axis=0)
+        n = self.n_intr
+        if np.all(self.counts == self.counts[0]):  # every view sees the whole board: batched products
+            Jiv = Ji.reshape(len(self.counts), -1, n)
+            JivT = Jiv.transpose(0, 2, 1)
+            A_views, g = JivT @ Jiv, (JivT @ r.reshape(len(self.counts), -1, 1))[:, :, 0]
+        else:
+            A_views = np.add.reduceat(np.einsum("pai,paj->pij", Ji, Ji), self.starts, axis=0)
+            g = np.add.reduceat(np.einsum("pai,pa->pi", Ji, r), self.starts, axis=0)
         dof = r.size - (self.n_intr + 6 * len(self.counts))  # > 0: checked on entry to calibrate()
         return NormalBlocks(A, Bs, Cs, A_views, g, _cost(r) / dof, _param_names(self.skew, self.dist_idx))
 

@@ -53,7 +53,8 @@ the views are too few). The method in words travels with the result
 
 The projection uncertainty (:func:`projection_covariance`) propagates the full covariance (the
 intrinsics' honest one and each pose's conditional ``sigma^2 C_v^-1``) through the Jacobian of a
-projection, view block by view block: ``O(M V)`` time and ``O(M)`` memory for ``M`` pixels.
+projection; the pose part of that Jacobian is linear in the point, so the sums over the views are
+taken once: ``O(V + M)`` time and memory for ``M`` pixels.
 """
 
 from __future__ import annotations
@@ -71,8 +72,6 @@ MIN_ROBUST_VIEWS = 6
 METHOD_ROBUST = ("the larger, in every direction, of the corner-noise model sigma^2 (J^T J)^-1 and a sandwich "
                  "over the {V} views (Bell-McCaffrey CR2, close to a leave-one-view-out jackknife)")
 METHOD_NOISE_MODEL = ("the noise model's covariance sigma^2 (J^T J)^-1 only: {why}")
-#: views processed at once when a projection's Jacobian is propagated (bounds the memory, not the result)
-_VIEW_CHUNK = 128
 
 
 @dataclass
@@ -168,38 +167,54 @@ def honest_intrinsic_covariance(blocks: NormalBlocks) -> tuple[np.ndarray, np.nd
 
 
 def projection_covariance(blocks: NormalBlocks, cov_intrinsics: np.ndarray, dq_dintr: np.ndarray,
-                          dq_dpose) -> np.ndarray:
-    """Covariance (M, 2, 2) of M projections whose Jacobian is ``[dq_dintr, dq_dpose(views)]``.
+                          dq_dP: np.ndarray, P: np.ndarray, omegas: np.ndarray,
+                          tvecs: np.ndarray | None) -> np.ndarray:
+    """Covariance (M, 2, 2) of the projections of M points held fixed in the boards' frames ("mean frames").
+
+    The point ``P`` (camera frame) is mapped into every board's frame with the solved poses, back with
+    perturbed ones and averaged; its projection moves with the intrinsics (``dq_dintr``) and, through
+    the averaged point (``dq_dP``), with every pose. Moving board ``v``'s rotation parameter ``k``
+    moves the average by ``[w_vk]_x (P - t_v) / V`` (``[w_vk]_x = dR_v/dr_k R_v^T``), its
+    translation by ``I / V``. So the pose Jacobian is linear in the point,
+    ``D_v(P) = ([P]_x L_v + N_v) / V`` with ``L_v = [-W_v, 0]`` and ``N_v = [[t_v]_x W_v, I]``, and
+    every sum over the views is a 3x3 or 3xn matrix computed once: ``O(V + M)`` time and memory.
 
     The full parameter covariance is ``W Sigma W^T + sigma^2 blockdiag(0, C_v^-1)`` with ``Sigma`` the
     intrinsics' covariance and ``W = [I; -C_v^-1 B_v^T]`` (the poses follow the intrinsics), the
-    exact block form of ``sigma^2 (J^T J)^-1`` when ``Sigma`` is the noise model's. So, for ``G = [G_I, G_v]``::
+    exact block form of ``sigma^2 (J^T J)^-1`` when ``Sigma`` is the noise model's. For
+    ``G = [G_I, G_v]``::
 
         G C G^T = (G_I - sum_v G_v C_v^-1 B_v^T) Sigma (...)^T + sigma^2 sum_v G_v C_v^-1 G_v^T
 
     Parameters
     ----------
-    blocks : NormalBlocks of the calibration
-    cov_intrinsics : (n, n) the intrinsics' covariance
+    blocks : NormalBlocks of the calibration;  cov_intrinsics : (n, n)
     dq_dintr : (M, 2, n) Jacobian of the projections with respect to the intrinsics
-    dq_dpose : callable ``(views: slice) -> (M, 2, c, 6)``, the Jacobian with respect to those views' poses
+    dq_dP : (M, 2, 3) Jacobian of the projections with respect to the (camera-frame) point
+    P : (M, 3) the points, camera frame
+    omegas : (V, 3, 3) ``W_v``, column k the axis of ``dR_v/dr_k R_v^T``
+    tvecs : (V, 3) board translations; ``None`` for points at infinity (directions: the translations
+        do not move them)
     """
-    M = dq_dintr.shape[0]
-    K = blocks.pose_coupling()  # (V, 6, n)
+    V = blocks.n_views
+    Kc = blocks.pose_coupling()  # (V, 6, n)
     Cinv = np.linalg.inv(blocks.C)
-    GW = np.array(dq_dintr, dtype=np.float64, copy=True)
-    pose_part = np.zeros((M, 2, 2))
-    n = K.shape[2]
-    for start in range(0, blocks.n_views, _VIEW_CHUNK):
-        sl = slice(start, min(start + _VIEW_CHUNK, blocks.n_views))
-        Gv = dq_dpose(sl)  # (M, 2, c, 6)
-        c = Gv.shape[2]
-        flat = Gv.reshape(M * 2, c * 6)
-        GW -= (flat @ K[sl].reshape(c * 6, n)).reshape(M, 2, n)
-        GC = np.matmul(Gv.transpose(2, 0, 1, 3).reshape(c, M * 2, 6), Cinv[sl])  # (c, 2M, 6): G_v C_v^-1
-        GC = GC.reshape(c, M, 2, 6).transpose(1, 2, 0, 3).reshape(M, 2, c * 6)
-        pose_part += np.matmul(GC, Gv.reshape(M, 2, c * 6).transpose(0, 2, 1))
-    return np.einsum("man,nk,mbk->mab", GW, cov_intrinsics, GW) + blocks.sigma2 * pose_part
+    L = np.zeros((V, 3, 6))
+    L[:, :, :3] = -omegas
+    N = np.zeros((V, 3, 6))
+    if tvecs is not None:
+        N[:, :, :3] = _skew_matrices(np.asarray(tvecs, dtype=np.float64)) @ omegas
+        N[:, :, 3:] = np.eye(3)
+    LC, NC = L @ Cinv, N @ Cinv
+    LK, NK = (L @ Kc).sum(axis=0) / V, (N @ Kc).sum(axis=0) / V  # (3, n)
+    LCL = (LC @ L.transpose(0, 2, 1)).sum(axis=0) / V ** 2
+    LCN = (LC @ N.transpose(0, 2, 1)).sum(axis=0) / V ** 2
+    NCN = (NC @ N.transpose(0, 2, 1)).sum(axis=0) / V ** 2
+    X = _skew_matrices(np.asarray(P, dtype=np.float64))  # (M, 3, 3)
+    GW = dq_dintr - dq_dP @ (X @ LK + NK)
+    XLCN = X @ LCN
+    pose3 = X @ LCL @ X.transpose(0, 2, 1) + XLCN + XLCN.transpose(0, 2, 1) + NCN  # (M, 3, 3)
+    return GW @ cov_intrinsics @ GW.transpose(0, 2, 1) + blocks.sigma2 * (dq_dP @ pose3 @ dq_dP.transpose(0, 2, 1))
 
 
 # --------------------------------------------------------------------------- rotations

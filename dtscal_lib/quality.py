@@ -422,25 +422,12 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     at_infinity = not np.isfinite(distance)
     P = ray if at_infinity else distance * ray
     _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew, result.dist_indices)
-    V = result.n_views
     R0, dR0 = rodrigues(result.rvecs)
-    t0 = np.zeros_like(result.tvecs) if at_infinity else np.asarray(result.tvecs, dtype=np.float64)
-
-    def dq_dpose(views: slice) -> np.ndarray:
-        # the point in board v's frame, Xb = R_v^T (P - t_v); the mean over the boards moves by 1/V of
-        # board v's motion: d mean / d r_k = dR_k Xb / V, d mean / d t = I / V
-        R, dR = R0[views], dR0[views]
-        c, m = len(R), len(P)
-        Xb = np.matmul(P[None] - t0[views][:, None], R)  # (c, M, 3): rows R^T (P - t)
-        dPdr = np.matmul(dR.reshape(c, 9, 3), Xb.transpose(0, 2, 1)) / V  # (c, 3k x 3i, M)
-        dPdr = dPdr.reshape(c * 3, 3, m).transpose(2, 1, 0)  # (M, 3i, c x 3k)
-        G = np.empty((m, 2, c, 6))
-        G[:, :, :, :3] = np.matmul(dqdP, dPdr).reshape(m, 2, c, 3)
-        G[:, :, :, 3:] = 0.0 if at_infinity else (dqdP / V)[:, :, None, :]
-        return G
-
+    W = np.einsum("vkij,vlj->vkil", dR0, R0)  # dR/dr_k R^T, a cross-product matrix [w_k]_x
+    omegas = np.stack([W[:, :, 2, 1], W[:, :, 0, 2], W[:, :, 1, 0]], axis=1)  # (V, 3 axis, 3 k)
     with np.errstate(invalid="ignore"):  # NaN rays (a lens model that cannot be inverted) stay NaN
-        return projection_covariance(blocks, cov_i, dqdI, dq_dpose)
+        return projection_covariance(blocks, cov_i, dqdI, dqdP, P, omegas,
+                                     None if at_infinity else np.asarray(result.tvecs, dtype=np.float64))
 
 
 def worst_direction_sigma(cov: np.ndarray) -> np.ndarray:
@@ -449,14 +436,17 @@ def worst_direction_sigma(cov: np.ndarray) -> np.ndarray:
     return np.sqrt(0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b ** 2))
 
 
-def uncertainty_map(result, *, step: int = 20, distance: float | None = None) -> UncertaintyMap:
-    """:func:`projection_uncertainty` (worst direction) on a grid every ``step`` pixels and at the image corners."""
+def uncertainty_map(result, *, step: int = 20, distance: float | None = None, cov=None) -> UncertaintyMap:
+    """:func:`projection_uncertainty` (worst direction) on a grid every ``step`` pixels and at the image corners.
+
+    ``cov`` : optional ``(NormalBlocks, intrinsic covariance)`` computed before (:func:`_uncertainty_inputs`)
+    """
     w, h = result.image_size
     u = np.arange(step / 2, w, step, dtype=float)
     v = np.arange(step / 2, h, step, dtype=float)
     corners = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
     grid = np.column_stack([np.tile(u, len(v)), np.repeat(v, len(u))])
-    cov = _uncertainty_inputs(result)
+    cov = _uncertainty_inputs(result) if cov is None else cov
     d = float(np.median(np.linalg.norm(result.tvecs, axis=1))) if distance is None else float(distance)
     s = worst_direction_sigma(projection_uncertainty(result, np.vstack([grid, corners]), distance=d, cov=cov))
     return UncertaintyMap(u, v, s[:-4].reshape(len(v), len(u)), corners, s[-4:], d)
@@ -725,10 +715,11 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     ri, ci = image_region(allpts, (w, h))
     counts = np.zeros((3, 3), dtype=int)
     np.add.at(counts, (ri, ci), 1)
-    umap = None
+    umap = cov = None
     if uncertainty:
         try:
-            umap = uncertainty_map(result, distance=distance)
+            cov = _uncertainty_inputs(result)
+            umap = uncertainty_map(result, distance=distance, cov=cov)
         except np.linalg.LinAlgError:
             umap = None
     if umap is not None:
@@ -753,7 +744,7 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     cons = None
     if umap is not None:
         try:
-            cons = consequences(result, umap=umap)
+            cons = consequences(result, umap=umap, cov=cov)
         except (np.linalg.LinAlgError, DtscalError):
             cons = None
     return Quality(verdict, findings, float(noise), n_noise, float(result.sigma), pv, res, umap, counts,
