@@ -283,3 +283,25 @@ def test_too_many_views_or_too_little_memory_is_a_clear_error_not_a_traceback(mo
     monkeypatch.setattr(quality, "_assess", no_memory)
     with pytest.raises(CalibrationError, match="not enough memory to judge a calibration of 8 views"):
         res.quality()
+
+
+def test_quality_and_calibration_do_not_import_each_other_both_ways():
+    """quality gets what it needs from CalibrationResult's public methods (normal_blocks, refit, ...):
+    calibration imports quality (for result.quality()), quality never imports calibration, and the
+    shared covariance module imports neither."""
+    import ast
+    from pathlib import Path
+
+    import dtscal_lib
+
+    def imported(module: str) -> set[str]:
+        tree = ast.parse((Path(dtscal_lib.__file__).parent / f"{module}.py").read_text())
+        out = set()
+        for node in ast.walk(tree):  # function-level imports count too
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                out.update([node.module] if node.module else [a.name for a in node.names])
+        return out
+
+    assert "calibration" not in imported("quality")
+    assert not {"calibration", "quality"} & imported("covariance")
+    assert "quality" in imported("calibration")
