@@ -92,9 +92,9 @@ from .limits import MIN_TILT_SPREAD_DEG  # noqa: E402
 OBJECT_EXTENT_RANGE = (1e-6, 1e6)
 #: image points may lie this fraction of the image size outside it (a detector never does)
 IMAGE_SLACK = 0.25
-#: most corners (over all views) one calibration takes: calibration and its verdict each need about
-#: 1.1 kB per corner (benchmarks/bench_memory.py: 4000 views x 35 corners, +148 MB and +151 MB), so this
-#: keeps either near 1 GB; more views than that add nothing a subset would not give
+#: most corners (over all views) one calibration takes: calibration needs about 1.1 kB per corner and its
+#: verdict about 0.6 kB (benchmarks/bench_memory.py: 4000 views x 35 corners, +148 MB and +82-89 MB), so
+#: this keeps either near 1 GB; more views than that add nothing a subset would not give
 MAX_POINTS = 1_000_000
 
 
