@@ -88,7 +88,10 @@ def _board_xy(cols=7, rows=5, sq=0.031):
 
 
 def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
-    """The argument tuples of one check and, where known, the true answers (else None)."""
+    """The argument tuples of one check and, where known, the true answers (else None).
+
+    With noise (``sigma``), the truth is what the case was drawn from (the true H, K or
+    pose), not what the noisy inputs determine exactly."""
     n, views = int(p.get("n", 20)), int(p.get("views", 1))
     if func == "project_points":
         K = CAMERAS[p.get("camera", "skewed")]
@@ -124,7 +127,7 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             H /= H[2, 2]
             dst = _apply(H, src) + rng.normal(0.0, sigma, size=(n, 2))
             args.append((src, dst))
-            truth.append(H if sigma == 0 else None)
+            truth.append(H)
         return args, truth
     if func in ("intrinsic_constraints", "intrinsics_from_homographies", "extrinsics_from_homography"):
         K = CAMERAS[p.get("camera", "skewed")]
@@ -147,8 +150,8 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
                                                    for _ in Hs]
             return [(H,) for H in Hs], [None] * len(Hs)
         if func == "intrinsics_from_homographies":
-            return [(Hs,)], [K if not sigma else None]
-        return [(K.copy(), H) for H in Hs], [pose if not sigma else None for pose in poses]
+            return [(Hs,)], [K]
+        return [(K.copy(), H) for H in Hs], poses
     if func in ("distort_normalized", "undistort_normalized"):
         d = np.array(p["dist"], float) if "dist" in p else LENSES[p.get("lens", "duckiebot")]
         if p.get("region") == "image":  # the distorted image's pixels, corners included
@@ -381,7 +384,118 @@ def judge_pose(built: Built, run: CheckRun):
     return (len(calls) - len(bad)) / len(calls), "; ".join(bad[:2])
 
 
-JUDGES = {"close": judge_close, "unchanged": judge_unchanged, "dtype": judge_dtype, "raises": judge_raises,
+def _origin(tol: dict, stat: str, unit: str) -> str:
+    """Where a noisy check's tolerance comes from, in words (stated in the feedback)."""
+    return (f"correct formulations land within {num(tol['tolerance'][stat])} {unit} of the truth on cases like this "
+            f"one (the largest of {len(tol['per_formulation_max'])} accepted formulations over {tol['seeds']} noise "
+            f"draws is {num(tol['max'][stat])} {unit}, times {num(tol['margin'])})")
+
+
+def _noisy_calls(built: Built, run: CheckRun):
+    calls, why = _calls_or_failure(built, run)
+    if calls is None:
+        return None, why
+    if not built.extra.get("tolerance"):
+        raise MaterialError(f"{built.name}: no derived tolerance for this noisy check; run "
+                            "python -m dtscal_lib.grading.tolerances --write")
+    return calls, ""
+
+
+def judge_truth_H(built: Built, run: CheckRun):
+    """Noisy correspondences: the fit's distance from the TRUE homography (RMS over the case's
+    source points, in pixels) within the tolerance derived from the accepted formulations."""
+    calls, why = _noisy_calls(built, run)
+    if calls is None:
+        return 0.0, why
+    tol = built.extra["tolerance"]
+    limit = tol["tolerance"]["truth_rms_px"]
+    bad = []
+    for i, (c, (src, _), H_true) in enumerate(zip(calls, [a for _, a in built.calls], built.extra["truth"])):
+        if not c.ok:
+            bad.append(f"case {i + 1}: raised {c.error}")
+            continue
+        if not isinstance(c.value, np.ndarray) or c.value.shape != (3, 3) or not np.all(np.isfinite(c.value)):
+            bad.append(f"case {i + 1}: expected a finite (3, 3) array, got {_describe_value(c.value)}")
+            continue
+        from .tolerances import truth_rms_px
+
+        err = truth_rms_px(c.value.astype(float), H_true, src)
+        if not err <= limit:
+            bad.append(f"case {i + 1}: your H maps the source points {num(err)} px (RMS) away from where the true "
+                       f"homography the case was drawn from maps them, allowed {num(limit)} px")
+    if not bad:
+        return 1.0, ""
+    return (len(calls) - len(bad)) / len(calls), "; ".join(bad[:2]) + "; " + _origin(tol, "truth_rms_px", "px")
+
+
+def judge_truth_K(built: Built, run: CheckRun):
+    """Noisy homographies: the largest entry difference between K and the TRUE K (pixels)
+    within the tolerance derived from the accepted formulations."""
+    calls, why = _noisy_calls(built, run)
+    if calls is None:
+        return 0.0, why
+    tol = built.extra["tolerance"]
+    limit = tol["tolerance"]["K_max_px"]
+    c, K_true = calls[0], built.extra["truth"][0]
+    if not c.ok:
+        return 0.0, f"raised {c.error}"
+    v = c.value
+    if not isinstance(v, np.ndarray) or v.shape != (3, 3) or not np.all(np.isfinite(v)):
+        return 0.0, f"expected a finite (3, 3) array, got {_describe_value(v)}"
+    from .tolerances import K_max_px
+
+    err = K_max_px(v.astype(float), K_true)
+    if err <= limit:
+        return 1.0, ""
+    names = ["fx", "s", "cx", "fy", "cy"]
+    diffs = np.abs(v.astype(float)[[0, 0, 0, 1, 1], [0, 1, 2, 1, 2]] - K_true[[0, 0, 0, 1, 1], [0, 1, 2, 1, 2]])
+    worst = names[int(np.argmax(diffs))]
+    return 0.0, (f"your K is {num(err)} px from the true K the views were drawn from (worst: {worst}, "
+                 f"{num(v[[0, 0, 0, 1, 1], [0, 1, 2, 1, 2]][int(np.argmax(diffs))])} instead of "
+                 f"{num(K_true[[0, 0, 0, 1, 1], [0, 1, 2, 1, 2]][int(np.argmax(diffs))])}), allowed {num(limit)} px: "
+                 + _origin(tol, "K_max_px", "px"))
+
+
+def judge_truth_pose(built: Built, run: CheckRun):
+    """Poses from noisy homographies: a proper rotation with t_z > 0, within the derived
+    tolerances of the TRUE pose: rotation angle in DEGREES, translation relative to |t|."""
+    calls, why = _noisy_calls(built, run)
+    if calls is None:
+        return 0.0, why
+    from .tolerances import pose_errors
+
+    tol = built.extra["tolerance"]
+    max_deg, t_rel = tol["tolerance"]["deg"], tol["tolerance"]["t_rel"]
+    bad = []
+    for i, (c, (R_true, t_true)) in enumerate(zip(calls, built.extra["truth"])):
+        parts = _arrays(c.value) if c.ok else None
+        if not c.ok:
+            bad.append(f"case {i + 1}: raised {c.error}")
+            continue
+        if parts is None or len(parts) != 2 or parts[0].shape != (3, 3) or parts[1].size != 3 \
+                or not all(np.all(np.isfinite(p.astype(float))) for p in parts):
+            bad.append(f"case {i + 1}: expected (R (3, 3), t (3,)), got {_describe_value(c.value)}")
+            continue
+        R, t = parts[0].astype(float), parts[1].astype(float).reshape(3)
+        orth = float(np.abs(R.T @ R - np.eye(3)).max())
+        deg, rel = pose_errors(R, t, R_true, t_true)
+        if orth > 1e-6 or np.linalg.det(R) < 0:
+            bad.append(f"case {i + 1}: R is not a rotation (|R^T R - I| = {num(orth)}, det = {num(np.linalg.det(R))})")
+        elif t[2] <= 0:
+            bad.append(f"case {i + 1}: t_z = {num(t[2])} puts the board behind the camera")
+        elif deg > max_deg or rel > t_rel:
+            bad.append(f"case {i + 1}: your pose is {num(deg)} deg and {num(100 * rel)} % of |t| from the true pose "
+                       f"the case was drawn from, allowed {num(max_deg)} deg and {num(100 * t_rel)} %")
+    if not bad:
+        return 1.0, ""
+    return (len(calls) - len(bad)) / len(calls), "; ".join(bad[:2]) + (
+        f"; correct formulations land within {num(max_deg)} deg and {num(100 * t_rel)} % of the true pose "
+        f"(the largest of {len(tol['per_formulation_max'])} accepted formulations over {tol['seeds']} noise draws, "
+        f"times {num(tol['margin'])})")
+
+
+JUDGES = {"truth_H": judge_truth_H, "truth_K": judge_truth_K, "truth_pose": judge_truth_pose,
+          "close": judge_close, "unchanged": judge_unchanged, "dtype": judge_dtype, "raises": judge_raises,
           "transfer": judge_transfer, "scaled": judge_scaled, "pose": judge_pose}
 
 
@@ -391,7 +505,7 @@ def _copy(args):
                  np.array(a, copy=True) if isinstance(a, np.ndarray) else a for a in args)
 
 
-def build_check(func: str, spec: dict, reference: Callable) -> Built:
+def build_check(func: str, spec: dict, reference: Callable, tolerances: dict | None = None) -> Built:
     """Turn one check of the grading material into calls, references and a judge.
 
     ``reference`` is the solution notebook's function. Where the truth is known by
@@ -410,7 +524,7 @@ def build_check(func: str, spec: dict, reference: Callable) -> Built:
         ref = reference(*_copy(args))
         ref = tuple(np.asarray(r, float) if np.asarray(r).dtype != np.float32 else np.asarray(r) for r in ref) \
             if isinstance(ref, tuple) else np.asarray(ref)
-        if true is not None:
+        if true is not None and not spec.get("sigma"):
             tol_abs = 0.02 if func == "rectification_maps" else 1e-6
             why = _compare(ref, tuple(np.asarray(x) for x in true) if isinstance(true, tuple) else np.asarray(true),
                            tol_abs, 1e-6, f"the reference solution of {func}")
@@ -419,5 +533,24 @@ def build_check(func: str, spec: dict, reference: Callable) -> Built:
                                     f"(OpenCV / ground truth): {why}")
         refs.append(ref)
     extra = {k: spec[k] for k in ("atol", "rtol", "tol", "dtype", "max_deg", "t_rel") if k in spec}
-    return Built(func, spec["name"], float(spec.get("weight", 1.0)), [(func, a) for a in args_list], refs,
-                 JUDGES[judge_name], extra)
+    built = Built(func, spec["name"], float(spec.get("weight", 1.0)), [(func, a) for a in args_list], refs,
+                  JUDGES[judge_name], extra)
+    if judge_name.startswith("truth_"):
+        from .tolerances import shape_key
+
+        extra["truth"] = truth
+        extra["tolerance"] = (tolerances or {}).get(shape_key(func, spec))
+        if not extra["tolerance"]:
+            raise MaterialError(f"{spec.get('name')}: no derived tolerance for this noisy check in "
+                                "grading/tolerances.json; run python -m dtscal_lib.grading.tolerances --write")
+        _check_reference(built, refs)
+    return built
+
+
+def _check_reference(built: Built, refs: list) -> None:
+    """The reference solution must pass its own noisy check (else the tolerance or the solution is wrong)."""
+    from .sandbox import Call
+
+    frac, why = built.judge(built, CheckRun(calls=[Call(ok=True, value=r) for r in refs]))
+    if frac < 1:
+        raise MaterialError(f"{built.name}: the reference solution fails its own noisy check: {why}")
