@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..selfcheck import diagnosis
-from .loader import Submission, load_submission, useful_import
+from . import substitutes
+from .loader import Submission, _called_names, load_submission, useful_import
 from .material import ASSIGNMENTS, Material
 from .sandbox import CPU_S, WALL_S, CheckRun, SandboxRun, run_calls
 
@@ -88,6 +89,7 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
     res.notes += [f"syntax error, cell skipped: {e}" for e in sub.syntax_errors]
     checks = material.checks(assignment)
     jobs, plan = [], {}
+    stand_ins: dict[str, list[str]] = {}
     for func in ASSIGNMENTS[assignment]:
         fr = FunctionResult(func)
         res.functions.append(fr)
@@ -105,14 +107,21 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
             fr.tests.append(TestResult(b.name, func, 0.0, b.weight, reason))
         if reason:
             continue
+        callees = exercise_callees(sub, func, ASSIGNMENTS[assignment])
+        if callees:
+            stand_ins[func] = callees
+        subst = [substitutes.source(c) for c in callees]
         for i, b in enumerate(checks[func]):
-            cid = len(jobs)
-            jobs.append({"id": cid, "calls": b.calls, "wall": wall_s, "cpu": cpu_s})
-            plan[cid] = (fr, i, b)
+            for variant in ("own", "stand-in") if callees else ("own",):
+                cid = len(jobs)
+                jobs.append({"id": cid, "calls": b.calls, "wall": wall_s, "cpu": cpu_s,
+                             **({"substitute": subst} if variant == "stand-in" else {})})
+                plan[cid] = (fr, i, b, variant)
         cid = len(jobs)
         probe = diagnosis.probe_args(func)
-        jobs.append({"id": cid, "calls": [(func, a) for a in probe], "wall": wall_s, "cpu": cpu_s})
-        plan[cid] = (fr, None, probe)
+        jobs.append({"id": cid, "calls": [(func, a) for a in probe], "wall": wall_s, "cpu": cpu_s,
+                     **({"substitute": subst} if subst else {})})
+        plan[cid] = (fr, None, probe, "")
     if jobs:
         statements = [(useful_import(src), line) if src.lstrip().startswith(("import ", "from ")) else (src, line)
                       for src, line in sub.statements]
@@ -128,7 +137,9 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
             line = statements[k][1] if k < len(statements) else "?"
             res.notes.append(f"statement at line {line} skipped: {err}")
         value_right: dict[str, bool] = {}
-        for cid, (fr, i, b) in plan.items():
+        judged: dict[tuple[str, int], dict[str, tuple[float, str]]] = {}
+        own_points: dict[str, float] = {}
+        for cid, (fr, i, b, variant) in plan.items():
             cr = run.checks.get(cid, CheckRun(failure="not run"))
             if i is None:
                 try:
@@ -141,19 +152,74 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
             printed = next((c.stdout for c in cr.calls if c.stdout.strip()), "")
             if printed and frac < 1:
                 msg += f"\nprinted: {printed[:300]}" + (" ... (output truncated)" if len(printed) > 300 else "")
-            fr.tests[i] = TestResult(b.name, fr.name, round(frac * b.weight, 4), b.weight, msg)
-            value_right.setdefault(fr.name, False)
-            value_right[fr.name] |= not b.form and frac > 0
+            judged.setdefault((fr.name, i), {})[variant] = (frac, msg)
+        for fr in res.functions:
+            for i, b in enumerate(checks[fr.name]):
+                if (fr.name, i) not in judged:
+                    continue
+                frac, msg = _one_charge(judged[(fr.name, i)], b.weight, stand_ins.get(fr.name, []))
+                own = judged[(fr.name, i)].get("own", (0.0,))[0]
+                own_points[fr.name] = own_points.get(fr.name, 0.0) + own * b.weight
+                fr.tests[i] = TestResult(b.name, fr.name, round(frac * b.weight, 4), b.weight, msg)
+                value_right.setdefault(fr.name, False)
+                value_right[fr.name] |= not b.form and frac > 0
         for fr in res.functions:  # form gives points only to a function that computes something right
             if fr.status == "graded" and not value_right.get(fr.name, False):
                 for i, b in enumerate(checks[fr.name]):
                     if b.form and fr.tests[i].score > 0:
                         fr.tests[i] = TestResult(b.name, fr.name, 0.0, b.weight, FORM_GATED)
+        for fr in res.functions:  # one bug, one charge: say what the student's own callee would cost
+            if fr.name in stand_ins and fr.status == "graded":
+                who, own = _names(stand_ins[fr.name]), own_points.get(fr.name, 0.0)
+                changed = f"With your own {who}, {fr.name} would score {own:.4g} / {fr.max_score:g} instead of " \
+                          f"{fr.score:g}." if abs(own - fr.score) > 1e-9 else f"Your own {who} gives it the same score."
+                res.notes.append(f"{fr.name} calls {who}: graded with the grader's {who} in place of yours and with "
+                                 f"yours, the better counts, so a mistake in {who} is charged there only. {changed}")
         for fr in res.functions:
             if fr.status == "graded" and all(t.output.startswith("not implemented") for t in fr.tests):
                 fr.status = "not implemented"
     res.execution_time = time.perf_counter() - t0
     return res
+
+
+def _names(names) -> str:
+    return " and ".join(names)
+
+
+def exercise_callees(sub: Submission, func: str, exercise: tuple[str, ...]) -> list[str]:
+    """The other exercise functions ``func`` calls (through the submission's own helpers too)
+    that have a grader's stand-in (:mod:`.substitutes`)."""
+    seen, todo, found = {func}, [func], []
+    while todo:
+        fn = sub.functions.get(todo.pop())
+        for name in sorted(_called_names(fn)) if fn is not None else ():
+            if name in exercise and name != func and name in substitutes.SUBSTITUTES:
+                if name not in found:
+                    found.append(name)
+            elif name in sub.functions and name not in seen:
+                seen.add(name)
+                todo.append(name)
+    return found
+
+
+def _one_charge(results: dict, weight: float, callees: list[str]) -> tuple[float, str]:
+    """The score of one check of a function that calls other exercise functions: the better of
+    the run with the student's own callees and the run with the grader's stand-ins, in words."""
+    own = results.get("own", (0.0, "not run"))
+    if not callees or "stand-in" not in results:
+        return own
+    stand = results["stand-in"]
+    who = _names(callees)
+    if abs(stand[0] - own[0]) < 1e-12:
+        return stand[0], (stand[1] + f"\n(graded with the grader's {who} in place of yours; yours gives the same "
+                          "result)") if stand[0] < 1 else ""
+    if stand[0] > own[0]:
+        return stand[0], "\n".join(x for x in (
+            stand[1], f"graded with the grader's {who} in place of yours: with your own {who} this check gets "
+            f"{own[0] * weight:.4g} / {weight:g} (the cause is in {who}, charged there)") if x)
+    return own[0], "\n".join(x for x in (
+        own[1], f"graded with your own {who}: the grader's {who} in its place gives {stand[0] * weight:.4g} / "
+        f"{weight:g} here") if x)
 
 
 def _diagnose(fr: FunctionResult, probe: list, cr: CheckRun) -> None:
