@@ -225,7 +225,7 @@ def derive(func: str, spec: dict, seeds: int = SEEDS, seed0: int = SEED0) -> dic
     top = {stat: max(w[stat] for w in worst.values()) for stat in all_values}
     return {
         "function": func,
-        "tolerance": {stat: float(f"{MARGIN * v:.3g}") for stat, v in top.items()},
+        "tolerance": {stat: _round_up(MARGIN * v) for stat, v in top.items()},
         "max": {stat: float(f"{v:.4g}") for stat, v in top.items()},
         "q999": {stat: float(f"{np.quantile(v, 0.999):.4g}") for stat, v in all_values.items()},
         "median": {stat: float(f"{np.median(v):.4g}") for stat, v in all_values.items()},
@@ -233,6 +233,12 @@ def derive(func: str, spec: dict, seeds: int = SEEDS, seed0: int = SEED0) -> dic
         "seeds": seeds, "seed0": seed0, "margin": MARGIN,
         "command": "python -m dtscal_lib.grading.tolerances --write",
     }
+
+
+def _round_up(x: float, digits: int = 3) -> float:
+    """``x`` rounded UP to ``digits`` significant digits (a tolerance never shrinks by rounding)."""
+    e = math.floor(math.log10(abs(x))) - digits + 1
+    return float(f"{math.ceil(x / 10 ** e) * 10 ** e:.{digits}g}")
 
 
 def noisy_specs(checks: dict) -> list[tuple[str, dict]]:
