@@ -247,6 +247,60 @@ def _calls_or_failure(built: Built, run: CheckRun):
     return run.calls, ""
 
 
+def explain(got, want, func: str = "") -> str:
+    """In words, how a wrong answer differs from the right one (or '' when no pattern shows)."""
+    gp, wp = _arrays(got), (list(want) if isinstance(want, tuple) else [want])
+    if gp is None or len(gp) != len(wp):
+        return ""
+    if func == "rectification_maps" and all(g.shape == np.shape(w) for g, w in zip(gp, wp)):
+        big = max(float(np.nanmax(np.abs(g.astype(float)), initial=0.0)) for g in gp)
+        span = max(np.shape(wp[0]))
+        if big > 1e3 * span:  # the maps' only polynomial is the lens model
+            return (f"map values up to {num(big)} for a {span}-pixel-wide image: the lens polynomial was evaluated "
+                    "on pixel-sized numbers; distortion applies to normalized coordinates (new_K^-1 first, then "
+                    "distort, then K)")
+    if len(wp) == 2 and all(g.shape == np.shape(w) for g, w in zip(gp, wp)) and all(
+            np.allclose(g.astype(float), np.asarray(w), rtol=1e-6, atol=1e-6) for g, w in zip(gp, wp[::-1])):
+        return "the two returned arrays are swapped"
+    for g, w in zip(gp, wp):
+        w, dtype = np.asarray(w, float), str(g.dtype)
+        if g.shape != w.shape:
+            if g.shape == w.shape[::-1] and len(w.shape) == 2:
+                return f"the array is transposed: shape {w.shape} expected, {g.shape} returned"
+            if g.size == w.size:
+                return f"the right number of values in the wrong shape ({g.shape} instead of {w.shape}: a squeeze, " \
+                       "a flatten or a missing reshape?)"
+            return f"shape {g.shape} instead of {w.shape}"
+        g = g.astype(float)
+        if not np.all(np.isfinite(g)):
+            return "NaN or infinite values: a division by zero or a square root of a negative number?"
+        scale = float(np.abs(w).max(initial=0.0)) or 1.0
+        err = float(np.abs(g - w).max(initial=0.0)) / scale
+        if err == 0.0:
+            continue
+        if err < 1e-5:
+            if dtype == "float32" and np.shape(w) and str(np.asarray(w).dtype) != "float32":
+                return ("a float32 answer, right to about 7 significant digits only: compute and return float64 "
+                        "(np.float64 arrays, no .astype(np.float32))")
+            return (f"right to about {max(1, int(-np.log10(err)))} significant digits only: float32 arithmetic, "
+                    "a rounded constant or a loose iteration tolerance somewhere; compute in float64 to ~1e-12")
+        if np.allclose(g, -w, rtol=1e-6, atol=1e-9 * scale):
+            return "the right answer with the opposite sign"
+        k = float(g.ravel() @ w.ravel()) / max(float(w.ravel() @ w.ravel()), 1e-300)
+        if abs(k) > 1e-12 and abs(k - 1) > 1e-6 and np.allclose(g, k * w, rtol=1e-6, atol=1e-9 * scale):
+            return f"the right answer times {num(k)} (a scale factor: a missing division or normalization?)"
+        if w.ndim == 2 and w.shape[1] == 2 and np.allclose(g, w[:, ::-1], rtol=1e-6, atol=1e-9 * scale):
+            return "the two columns are swapped (column 0 holds the first coordinate)"
+        if w.ndim == 2 and len(w) > 1 and np.allclose(np.sort(g, axis=0), np.sort(w, axis=0), rtol=1e-9,
+                                                       atol=1e-12 * scale):
+            return "the right values in another order (check which index runs fastest)"
+        if w.ndim == 2 and w.shape[1] == 2 and len(w) > 1:
+            d = g - w
+            if np.allclose(d, d[0], rtol=0, atol=1e-6 * scale):
+                return f"every point is shifted by the same offset ({num(d[0, 0])}, {num(d[0, 1])})"
+    return ""
+
+
 def judge_close(built: Built, run: CheckRun):
     calls, why = _calls_or_failure(built, run)
     if calls is None:
@@ -259,9 +313,14 @@ def judge_close(built: Built, run: CheckRun):
             continue
         why = _compare(c.value, ref, atol, rtol, "the answer")
         if why:
-            bad.append(f"case {i + 1}: {why}" + (f" (returned {c.note})" if c.note else ""))
+            words = explain(c.value, ref, built.func)
+            bad.append(f"case {i + 1}: " + (f"{words}; " if words else "") + why
+                       + (f" (returned {c.note})" if c.note else ""))
     ok = len(calls) - len(bad)
-    return ok / len(calls), ("; ".join(bad[:2]) + (f" (+{len(bad) - 2} more)" if len(bad) > 2 else "")) if bad else ""
+    if not bad:
+        return 1.0, ""
+    head = f"wrong on {len(bad)} of {len(calls)} case(s) of this check ({built.extra.get('about') or built.name}). "
+    return ok / len(calls), head + "; ".join(bad[:2]) + (f" (+{len(bad) - 2} more)" if len(bad) > 2 else "")
 
 
 def judge_unchanged(built: Built, run: CheckRun):
@@ -453,6 +512,44 @@ def _copy(args):
                  np.array(a, copy=True) if isinstance(a, np.ndarray) else a for a in args)
 
 
+def about(func: str, spec: dict) -> str:
+    """What a check's case tests, in words (said when a case fails and no mistake is named)."""
+    if spec.get("about"):
+        return str(spec["about"])
+    words = []
+    if spec.get("camera") == "4k":
+        words.append("pixel coordinates in the thousands: precision matters there")
+    if spec.get("offset"):
+        words.append(f"coordinates near {num(spec['offset'])}: an unnormalized DLT loses precision there "
+                     "(activity text, eqs. (3)-(6))")
+    if spec.get("random_scale"):
+        words.append("homographies multiplied by a random scale and sign: the answer must not depend on them")
+    if spec.get("n") == 1:
+        words.append("a single point: the result keeps its (1, 2) shape")
+    if spec.get("depth"):
+        words.append("points far away: large depths")
+    if spec.get("lens") == "tangential":
+        words.append("a lens with tangential terms p1, p2")
+    if spec.get("lens") == "radial_k3":
+        words.append("a lens with k3 (the r^6 term)")
+    if spec.get("region") == "image":
+        words.append("the whole image, corners included, where the distortion is strongest")
+    if spec.get("lens") == "none":
+        words.append("no distortion: the answer is the input (or the identity map)")
+    if spec.get("alpha") is not None:
+        words.append(f"a rectified camera new_K != K (alpha = {num(spec['alpha'])})")
+    if func == "intrinsic_constraints" and spec.get("random_H"):
+        words.append("random 3x3 matrices: rows v12 and v11 - v22 of eqs. (12)-(13) for any H")
+    if spec.get("views") == 3 and func == "intrinsics_from_homographies":
+        words.append("the minimal 3 views")
+    if spec.get("n") == 4 and func == "estimate_homography":
+        words.append("the minimal 4 correspondences")
+    if func == "board_ground_points":
+        words.append("ground points of boards of other sizes and places: near-right corner first, "
+                     "leftwards along the near row, then row by row away")
+    return "; ".join(words) or spec.get("name", "")
+
+
 def build_check(func: str, spec: dict, reference: Callable, tolerances: dict | None = None) -> Built:
     """Turn one check of the grading material into calls, references and a judge.
 
@@ -481,6 +578,7 @@ def build_check(func: str, spec: dict, reference: Callable, tolerances: dict | N
                                     f"(OpenCV / ground truth): {why}")
         refs.append(ref)
     extra = {k: spec[k] for k in ("atol", "rtol", "tol", "dtype", "max_deg", "t_rel") if k in spec}
+    extra["about"] = about(func, spec)
     built = Built(func, spec["name"], float(spec.get("weight", 1.0)), [(func, a) for a in args_list], refs,
                   JUDGES[judge_name], extra, form=judge_name in FORM_JUDGES)
     if judge_name.startswith("truth_"):

@@ -138,7 +138,7 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
             res.notes.append(f"statement at line {line} skipped: {err}")
         value_right: dict[str, bool] = {}
         judged: dict[tuple[str, int], dict[str, tuple[float, str]]] = {}
-        own_points: dict[str, float] = {}
+        own_points: dict[str, list] = {}
         for cid, (fr, i, b, variant) in plan.items():
             cr = run.checks.get(cid, CheckRun(failure="not run"))
             if i is None:
@@ -159,7 +159,9 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
                     continue
                 frac, msg = _one_charge(judged[(fr.name, i)], b.weight, stand_ins.get(fr.name, []))
                 own = judged[(fr.name, i)].get("own", (0.0,))[0]
-                own_points[fr.name] = own_points.get(fr.name, 0.0) + own * b.weight
+                own_points.setdefault(fr.name, [0.0, 0.0, False])  # value points, form points, a value right
+                own_points[fr.name][1 if b.form else 0] += own * b.weight
+                own_points[fr.name][2] |= not b.form and own > 0
                 fr.tests[i] = TestResult(b.name, fr.name, round(frac * b.weight, 4), b.weight, msg)
                 value_right.setdefault(fr.name, False)
                 value_right[fr.name] |= not b.form and frac > 0
@@ -170,7 +172,8 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
                         fr.tests[i] = TestResult(b.name, fr.name, 0.0, b.weight, FORM_GATED)
         for fr in res.functions:  # one bug, one charge: say what the student's own callee would cost
             if fr.name in stand_ins and fr.status == "graded":
-                who, own = _names(stand_ins[fr.name]), own_points.get(fr.name, 0.0)
+                value, form, right = own_points.get(fr.name, [0.0, 0.0, False])
+                who, own = _names(stand_ins[fr.name]), value + (form if right else 0.0)
                 changed = f"With your own {who}, {fr.name} would score {own:.4g} / {fr.max_score:g} instead of " \
                           f"{fr.score:g}." if abs(own - fr.score) > 1e-9 else f"Your own {who} gives it the same score."
                 res.notes.append(f"{fr.name} calls {who}: graded with the grader's {who} in place of yours and with "
@@ -210,9 +213,8 @@ def _one_charge(results: dict, weight: float, callees: list[str]) -> tuple[float
         return own
     stand = results["stand-in"]
     who = _names(callees)
-    if abs(stand[0] - own[0]) < 1e-12:
-        return stand[0], (stand[1] + f"\n(graded with the grader's {who} in place of yours; yours gives the same "
-                          "result)") if stand[0] < 1 else ""
+    if abs(stand[0] - own[0]) < 1e-12:  # the function-level note says how it was graded
+        return stand
     if stand[0] > own[0]:
         return stand[0], "\n".join(x for x in (
             stand[1], f"graded with the grader's {who} in place of yours: with your own {who} this check gets "

@@ -14,7 +14,7 @@ than 1 draw in ``SEEDS`` (the tests re-check this on other seeds).
 The derived numbers are stored with the cases, in ``grading/tolerances.json`` (next to
 ``grading/cases.py``); regenerate them after changing a noisy check's parameters::
 
-    python -m dtscal_lib.grading.tolerances --write      # ~1 min on one core
+    python -m dtscal_lib.grading.tolerances --write      # ~3 min on one core
 
 A noisy check whose parameters have no stored tolerance is refused (MaterialError), so a
 stale file can never grade.
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 #: Monte Carlo draws per noisy check, and the margin over the largest error they reach
-SEEDS, MARGIN = 2000, 1.25
+SEEDS, MARGIN = 10000, 1.25
 #: the draws use seeds SEED0, SEED0 + 1, ... (never a case's own seed range, 640xxx)
 SEED0 = 10_000_000
 #: the check parameters that shape the inputs (name, weight, seed and judge settings do not)
