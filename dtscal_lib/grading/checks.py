@@ -281,7 +281,7 @@ def explain(got, want, func: str = "") -> str:
         if err < 1e-5:
             if dtype == "float32" and np.shape(w) and str(np.asarray(w).dtype) != "float32":
                 return ("a float32 answer, right to about 7 significant digits only: compute and return float64 "
-                        "(np.float64 arrays, no .astype(np.float32))")
+                        "(no .astype(float32) anywhere)")
             return (f"right to about {max(1, int(-np.log10(err)))} significant digits only: float32 arithmetic, "
                     "a rounded constant or a loose iteration tolerance somewhere; compute in float64 to ~1e-12")
         if np.allclose(g, -w, rtol=1e-6, atol=1e-9 * scale):
