@@ -209,9 +209,18 @@ def test_wrong_callee_is_charged_once(tmp_path, material):
     scores = {f.name: f.score for f in res.functions}
     assert scores == {"distort_normalized": 0, "undistort_normalized": 10, "rectification_maps": 10}, text(res)
     notes = "\n".join(res.notes)
-    assert "undistort_normalized calls distort_normalized: graded with the grader's distort_normalized" in notes
+    assert "undistort_normalized calls distort_normalized, which lost points: graded with the grader's " \
+           "distort_normalized" in notes
     assert "With your own distort_normalized, undistort_normalized would score 3 / 10 instead of 10." in notes
     assert "With your own distort_normalized, rectification_maps would score 4 / 10 instead of 10." in notes
+
+
+def test_right_callee_is_used_as_is(material):
+    res = grade_file(CORRECT / "04_distortion_rectification__plain_newton_inv.py", material,
+                     "04_distortion_rectification")
+    assert res.score == 30
+    assert "undistort_normalized calls distort_normalized, which passes all its checks: graded with yours." \
+        in res.notes
 
 
 def test_stand_ins_agree_with_opencv():
