@@ -237,6 +237,26 @@ def find_saddles(gray: np.ndarray, *, scale: float = 0.5, sigma: float = 1.0,
         (turns by 90 degrees between neighbouring checkerboard corners)
     strength : (M,) float64 saddle strength
     """
+    return _saddles(gray, scale, sigma, rel_threshold, min_strength)[:3]
+
+
+#: the sub-pixel saddle (one Newton step to where the blurred intensity's gradient vanishes) is used only
+#: when it lies within this many pixels of the resized image from the peak pixel; farther, the quadratic
+#: model does not hold and the peak pixel is kept
+SADDLE_NEWTON_REACH = 1.0
+
+
+def _saddles(gray: np.ndarray, scale: float = 0.5, sigma: float = 1.0, rel_threshold: float = 0.15,
+             min_strength: float = 20.0):
+    """:func:`find_saddles`, and also each saddle at sub-pixel precision ``(M, 2)``.
+
+    A checkerboard corner is a saddle of the blurred intensity: its gradient vanishes there (the pattern is
+    point-symmetric about the corner). One Newton step from the peak pixel, ``-H^-1 grad f`` with the same
+    Sobel filters, puts it there. Measured on the 26 real photographs (``data/real``, the 1300 corners the
+    kit finds): 0.08 px median, 0.19 px 90th percentile, 0.43 px at most from the refined corners, against
+    0.78 / 1.12 / 1.50 px for the peak pixel; started there, ``cornerSubPix`` needs one iteration fewer
+    (the refinement's first pass). The clusters and the lattice use the peak pixels (``points``).
+    """
     small = gray if scale == 1 else cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     f = cv2.GaussianBlur(small.astype(np.float32), (0, 0), sigma)
     fxx = cv2.Sobel(f, cv2.CV_32F, 2, 0, ksize=3)
@@ -250,7 +270,19 @@ def find_saddles(gray: np.ndarray, *, scale: float = 0.5, sigma: float = 1.0,
     angle = 0.5 * np.arctan2(2.0 * b, a - c).astype(np.float64)
     # pixel centres: small pixel k covers full-size pixels [k/scale, (k+1)/scale)
     pts = (np.column_stack([xs, ys]).astype(np.float64) + 0.5) / scale - 0.5
-    return pts, angle, s[ys, xs].astype(np.float64)
+    # the Newton step: 3x3 Sobel first derivatives (8 f_x) at the peaks, with the Sobel second ones (4 f_xx)
+    fp = np.pad(f, 1, mode="edge")
+    X, Y = xs + 1, ys + 1
+    gx = (fp[Y - 1, X + 1] - fp[Y - 1, X - 1]) + 2 * (fp[Y, X + 1] - fp[Y, X - 1]) + (fp[Y + 1, X + 1] - fp[Y + 1, X - 1])
+    gy = (fp[Y + 1, X - 1] - fp[Y - 1, X - 1]) + 2 * (fp[Y + 1, X] - fp[Y - 1, X]) + (fp[Y + 1, X + 1] - fp[Y - 1, X + 1])
+    gx, gy = gx.astype(np.float64) / 8.0, gy.astype(np.float64) / 8.0
+    a, b, c = a.astype(np.float64) / 4.0, b.astype(np.float64) / 4.0, c.astype(np.float64) / 4.0
+    det = a * c - b * b  # < 0 at a saddle
+    with np.errstate(divide="ignore", invalid="ignore"):
+        step = -np.column_stack([c * gx - b * gy, a * gy - b * gx]) / det[:, None]
+    keep = np.all(np.abs(step) <= SADDLE_NEWTON_REACH, axis=1)  # also False for NaN
+    fine = pts + np.where(keep[:, None], step, 0.0) / scale
+    return pts, angle, s[ys, xs].astype(np.float64), fine
 
 
 # --------------------------------------------------------------------------- step 2: clusters
@@ -285,13 +317,15 @@ class _Candidate:
     strength: np.ndarray | None = None
     #: every saddle of the frame (points, strengths, their KD-tree): the lattice's ring test looks at all of them
     frame_saddles: tuple | None = None
+    #: the saddles at sub-pixel precision (:func:`_saddles`), the lattice's corners (``saddles`` if None)
+    fine: np.ndarray | None = None
 
 
 def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
                 min_fraction: float = 0.8) -> list[_Candidate]:
     """:func:`board_regions` with each box's saddle cluster (see there)."""
     h, w = gray.shape[:2]
-    pts, ang, strength = find_saddles(gray)
+    pts, ang, strength, fine = _saddles(gray)
     n = len(pts)
     need = max(4, int(math.ceil(min_fraction * board.n_corners)))
     if n < need:
@@ -324,7 +358,7 @@ def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
         # white margin and for corners the saddle test missed
         pad = 1.5 * spacing + 4.0
         regions.append(_Candidate(_box_around(pts[members], pad, w, h), pts[members], spacing,
-                                  strength[members], frame))
+                                  strength[members], frame, fine[members]))
         # a strongly foreshortened board (e.g. lying on the floor) can split into pieces where
         # its row and column spacings differ more than the link rule allows: first try the
         # box that also holds the pieces of at least 4 saddles within MERGE_REACH spacings
@@ -332,11 +366,11 @@ def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
         group = np.unique(label[np.isfinite(near)])
         group = group[(sizes[group] >= 4) & (group != seed)]
         if len(group):
-            inside = pts[np.isin(label, np.append(group, seed))]
-            merged = _box_around(inside, pad, w, h)
+            together = np.isin(label, np.append(group, seed))
+            merged = _box_around(pts[together], pad, w, h)
             if merged != regions[-1].box:
-                regions.insert(len(regions) - 1, _Candidate(merged, inside, spacing,
-                                                            strength[np.isin(label, np.append(group, seed))], frame))
+                regions.insert(len(regions) - 1, _Candidate(merged, pts[together], spacing, strength[together],
+                                                            frame, fine[together]))
     return regions
 
 
@@ -372,8 +406,8 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     weakest saddle is strongest; the saddles one step outside it must be clearly weaker (the printed board's
     edge, where a single square's corner meets the white margin, gives weaker saddles one step out; equally
     strong ones mean a window of a bigger grid: None; see :data:`LATTICE_RING_RATIO`).
-    Corners come out in a row-major order of the board at the saddle finder's precision (about a pixel);
-    :func:`_finish` orders, refines and checks them as it does the classic detector's, and where its checks
+    Corners come out in a row-major order of the board at the sub-pixel saddles' precision (``cand.fine``,
+    about 0.1-0.2 px: :func:`_saddles`; the walk itself uses the peak pixels); :func:`_finish` orders, refines and checks them as it does the classic detector's, and where its checks
     fail the classic detector still runs.
 
     Measured: the lattice gives the board in 24 of 26 views of ``data/real`` and 339 of the 353 detections of
@@ -478,7 +512,8 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     if max(float(side.mean()) for side in sides) >= LATTICE_RING_SIDE:
         return None
     grid = win.T if ni == board.cols else win  # rows x cols, a row-major order of the board
-    return pts[grid.reshape(-1)]
+    fine = pts if cand.fine is None else np.asarray(cand.fine, dtype=np.float64)
+    return fine[grid.reshape(-1)]
 
 
 def _box_around(p: np.ndarray, pad: float, w: int, h: int) -> tuple[int, int, int, int]:
@@ -914,17 +949,47 @@ def polish_corners(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIET
     return c
 
 
+def _patches(img: np.ndarray, pts: np.ndarray, n: int) -> np.ndarray:
+    """``(M, n, n)`` float32: ``cv2.getRectSubPix(img, (n, n), pt)`` of every point at once (``img`` float32).
+
+    The same bilinear sampling (pixel ``(i, j)`` of a patch is the image at ``pt + (j, i) - (n - 1) / 2``),
+    gathered for all points in one numpy step instead of one OpenCV call per point (measured on the real
+    photographs: 26 outer corners in about 0.1 ms instead of 0.5 ms). Points whose patch reaches past the
+    image edge are sampled by ``getRectSubPix`` (it replicates the edge).
+    """
+    h, w = img.shape
+    p = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+    origin = p - 0.5 * (n - 1)
+    base = np.floor(origin).astype(np.intp)
+    frac = origin - base
+    inside = np.all((base >= 0) & (base + n < (w, h)), axis=1)
+    out = np.empty((len(p), n, n), dtype=np.float32)
+    if inside.any():
+        blocks = np.lib.stride_tricks.sliding_window_view(img, (n + 1, n + 1))[base[inside, 1], base[inside, 0]]
+        ax, ay = frac[inside, 0, None, None].astype(np.float32), frac[inside, 1, None, None].astype(np.float32)
+        rows = blocks[:, :, :-1] + ax * (blocks[:, :, 1:] - blocks[:, :, :-1])  # along x, then along y
+        out[inside] = rows[:, :-1] + ay * (rows[:, 1:] - rows[:, :-1])
+    for k in np.flatnonzero(~inside):
+        out[k] = cv2.getRectSubPix(img, (n, n), (float(p[k, 0]), float(p[k, 1])))
+    return out
+
+
 def _window_gradients(gray: np.ndarray, pts: np.ndarray, radius):
-    """Per group of equal window half-size: ``(indices, n, gx, gy)``, the image gradients of an
-    ``n x n`` patch (``n = 2 radius + 3``) around each of those points, sub-pixel centred."""
+    """The image gradients around each point, for windows of half-size ``radius``, all points at once.
+
+    Returns ``(gx, gy, d, inside)``: ``gx, gy`` ``(M, m, m)`` central differences of the sub-pixel centred
+    patches (:func:`_patches`) on the ``m x m`` grid (``m = 2 max(radius) + 1``) of offsets ``d`` (pixels,
+    ``(m,)``) from the point, and ``inside`` ``(M, m, m)`` bool, each point's own ``(2 radius + 1)``-square window.
+    """
     radius = np.asarray(radius, dtype=int).reshape(-1)
     img = gray if gray.dtype == np.float32 else gray.astype(np.float32)
-    for r in np.unique(radius):
-        sel = np.flatnonzero(radius == r)
-        n = 2 * int(r) + 3
-        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
-        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
-        yield sel, n, gx, gy
+    big = int(radius.max(initial=0))
+    patch = _patches(img, pts, 2 * big + 3)
+    gx = 0.5 * (patch[:, 1:-1, 2:] - patch[:, 1:-1, :-2])
+    gy = 0.5 * (patch[:, 2:, 1:-1] - patch[:, :-2, 1:-1])
+    d = np.arange(-big, big + 1, dtype=np.float64)
+    near = np.abs(d)[None, :] <= radius[:, None]  # (M, m)
+    return gx, gy, d, near[:, :, None] & near[:, None, :]
 
 
 def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
@@ -946,17 +1011,15 @@ def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     (M,) float64
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    out = np.ones(len(pts))
-    for sel, n, gx, gy in _window_gradients(gray, pts, radius):
-        d = np.arange(n) - (n - 1) / 2.0
-        px, py = np.meshgrid(d, d)
-        keep = (np.hypot(px, py) >= 1.0)[1:-1, 1:-1]
-        gx, gy = gx[:, 1:-1, 1:-1][:, keep], gy[:, 1:-1, 1:-1][:, keep]
-        px, py = px[1:-1, 1:-1][keep], py[1:-1, 1:-1][keep]
-        num = np.sum((gx * px + gy * py) ** 2, axis=1)
-        den = np.sum((gx * gx + gy * gy) * (px * px + py * py), axis=1)
-        out[sel] = np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
-    return out
+    if len(pts) == 0:
+        return np.ones(0)
+    gx, gy, d, inside = _window_gradients(gray, pts, radius)
+    px, py = np.meshgrid(d, d)
+    inside &= (np.hypot(px, py) >= 1.0)
+    gx, gy = gx * inside, gy * inside
+    num = np.sum((gx * px + gy * py) ** 2, axis=(1, 2))
+    den = np.sum((gx * gx + gy * gy) * (px * px + py * py), axis=(1, 2))
+    return np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
 
 
 def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
@@ -976,14 +1039,14 @@ def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) ->
     (M,) float64
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    out = np.zeros(len(pts))
-    for sel, _, gx, gy in _window_gradients(gray, pts, radius):
-        gx, gy = gx[:, 1:-1, 1:-1], gy[:, 1:-1, 1:-1]
-        a, b, d = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
-        half_tr, det = 0.5 * (a + d), a * d - b * b
-        root = np.sqrt(np.maximum(half_tr ** 2 - det, 0.0))
-        out[sel] = np.where(half_tr > 0, (half_tr - root) / np.maximum(half_tr + root, 1e-300), 0.0)
-    return out
+    if len(pts) == 0:
+        return np.zeros(0)
+    gx, gy, _, inside = _window_gradients(gray, pts, radius)
+    gx, gy = gx * inside, gy * inside
+    a, b, d = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
+    half_tr, det = 0.5 * (a + d), a * d - b * b
+    root = np.sqrt(np.maximum(half_tr ** 2 - det, 0.0))
+    return np.where(half_tr > 0, (half_tr - root) / np.maximum(half_tr + root, 1e-300), 0.0)
 
 
 def _outer_ring(board: Board) -> np.ndarray:
