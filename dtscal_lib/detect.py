@@ -369,7 +369,10 @@ def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
         # its row and column spacings differ more than the link rule allows: first try the
         # box that also holds the pieces of at least 4 saddles within MERGE_REACH spacings
         other = np.flatnonzero((sizes[label] >= 4) & (label != seed))
-        if len(other):
+        if len(other) * sizes[seed] <= 20000:  # few: all distances (as cKDTree's bound, strictly closer)
+            d2 = ((pts[other, None, :] - pts[None, members, :]) ** 2).sum(-1)
+            other = other[np.sqrt(d2.min(axis=1, initial=np.inf)) < MERGE_REACH * spacing]
+        else:
             near, _ = cKDTree(pts[members]).query(pts[other], distance_upper_bound=MERGE_REACH * spacing)
             other = other[np.isfinite(near)]
         group = np.unique(label[other])
@@ -430,14 +433,17 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
         return None
     k = min(7, n)
     _, nbr = cKDTree(pts).query(pts, k=k)
-    xs, ys = pts[:, 0].tolist(), pts[:, 1].tolist()
-    nbr = nbr[:, 1:].tolist()
+    nbr = nbr[:, 1:]
+    # each saddle's neighbours as (dx, dy, index) from it, for the walk below (plain Python: a few hundred
+    # small steps, where numpy's per-call cost would dominate)
+    rel = [list(zip(*r)) for r in zip((pts[nbr, 0] - pts[:, 0, None]).tolist(),
+                                      (pts[nbr, 1] - pts[:, 1, None]).tolist(), nbr.tolist())]
     # seed: the saddle nearest the centre of the strong half (a board corner, not an edge saddle)
     strength = cand.strength if cand.strength is not None else np.ones(n)
     strong = strength >= np.median(strength)
     centre = pts[strong].mean(axis=0)
     seed = int(np.argmin(np.linalg.norm(pts - centre, axis=1)))
-    vec = pts[nbr[seed]] - pts[seed]
+    vec = pts[nbr[seed]] - pts[seed]  # nearest first
     length = np.linalg.norm(vec, axis=1)
     u = vec[0]
     cos = np.abs(vec[1:] @ u) / np.maximum(length[1:] * length[0], 1e-12)
@@ -449,20 +455,20 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     local = {seed: (float(u[0]), float(u[1]), float(v[0]), float(v[1]))}
     queue = [seed]
     head = 0
+    reach2 = LATTICE_REACH * LATTICE_REACH
     while head < len(queue):
         p = queue[head]
         head += 1
         i, j = index[p]
         ux, uy, vx, vy = local[p]
-        px, py = xs[p], ys[p]
+        near = rel[p]
         for di, dj, sx, sy in ((1, 0, ux, uy), (-1, 0, -ux, -uy), (0, 1, vx, vy), (0, -1, -vx, -vy)):
-            qx, qy = px + sx, py + sy
-            reach2 = LATTICE_REACH * LATTICE_REACH * (sx * sx + sy * sy)
-            best, best_d = -1, reach2
-            for q in nbr[p]:
-                d = (xs[q] - qx) ** 2 + (ys[q] - qy) ** 2
+            best, best_d = -1, reach2 * (sx * sx + sy * sy)
+            for rx, ry, q in near:
+                dx, dy = rx - sx, ry - sy
+                d = dx * dx + dy * dy
                 if d < best_d:
-                    best, best_d = q, d
+                    best, best_d, ax, ay = q, d, rx, ry
             if best < 0:
                 continue
             key = (i + di, j + dj)
@@ -474,7 +480,6 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
                 return None
             index[best] = key
             at[key] = best
-            ax, ay = xs[best] - px, ys[best] - py
             local[best] = (ax * di, ay * di, vx, vy) if di else (ux, uy, ax * dj, ay * dj)
             queue.append(best)
     if len(at) < board.n_corners:
@@ -635,10 +640,6 @@ REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
 #: step below 0.1 px leaves about 0.005 px; from the sub-pixel saddles (:func:`_saddles`) most corners stop
 #: after one or two iterations instead of two or three (first pass 1.40 -> 0.96 ms median on ``data/real``)
 FIRST_PASS_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.1)
-#: stopping rule of the polish (:func:`polish_corners`): it starts from corners within a few hundredths of a
-#: pixel (the bias it removes), so one iteration nearly always suffices; one step below 0.05 px leaves about
-#: 0.003 px (polish 1.14 -> 0.68 ms median on ``data/real``)
-POLISH_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.05)
 #: the kit's last refinement step works on the image smoothed by a Gaussian of this sigma, pixels
 #: (see :func:`polish_corners`)
 REFINE_SIGMA = 1.0
@@ -721,17 +722,16 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
 
     along = unit(right, -left)   # direction of the rows at each corner
     across = unit(down, -up)     # direction of the columns
-    room = np.full(right.shape[:2], np.inf)
-    # a side reached by stepping along `step` has its far edge parallel to `edge_dir`
-    for step, opposite, edge_dir in ((right, left, across), (left, right, across),
-                                     (down, up, along), (up, down, along)):
-        normal = np.stack([-edge_dir[..., 1], edge_dir[..., 0]], axis=-1)
-        support = np.abs(normal).sum(axis=-1)
-        dist = np.abs((step * normal).sum(axis=-1))
-        outer = np.isnan(dist)
-        dist_opp = np.abs((opposite * normal).sum(axis=-1))
-        reach = np.where(outer, outer_fraction * dist_opp, INNER_REACH * dist)
-        room = np.minimum(room, (reach - margin) / support)
+    # the four sides at once: a side reached by stepping along `step` has its far edge parallel to `edge_dir`
+    step = np.stack([right, left, down, up])
+    opposite = np.stack([left, right, up, down])
+    edge_dir = np.stack([across, across, along, along])
+    normal = np.stack([-edge_dir[..., 1], edge_dir[..., 0]], axis=-1)
+    support = np.abs(normal).sum(axis=-1)
+    dist = np.abs((step * normal).sum(axis=-1))
+    dist_opp = np.abs((opposite * normal).sum(axis=-1))
+    reach = np.where(np.isnan(dist), outer_fraction * dist_opp, INNER_REACH * dist)
+    room = ((reach - margin) / support).min(axis=0)
     return np.maximum(MIN_WINDOW, np.floor(room)).astype(int).ravel()
 
 
@@ -799,12 +799,21 @@ def _local_homography(c: np.ndarray, board: Board, reach: int, exclude: np.ndarr
     return _local_homography_at(c, board, reach, exclude, np.arange(R * C))
 
 
+@functools.lru_cache(maxsize=4)
+def _offsets(reach: int):
+    """Index offsets ``(dj, di)`` within ``reach`` (the centre left out), and the products ``P P^T`` of
+    ``P = (di, dj, 1)`` for each, flattened ``(K, 9)``: the blocks of a DLT's normal matrix."""
+    offs = np.array([(dj, di) for dj in range(-reach, reach + 1) for di in range(-reach, reach + 1)
+                     if (dj, di) != (0, 0)])
+    P = np.column_stack([offs[:, 1], offs[:, 0], np.ones(len(offs))]).astype(np.float64)
+    return offs, (P[:, :, None] * P[:, None, :]).reshape(-1, 9)
+
+
 def _local_homography_at(c: np.ndarray, board: Board, reach: int, exclude: np.ndarray | None, targets: np.ndarray):
     """:func:`_local_homography` for the corners ``targets`` (indices): (pred, err, n), each for those only."""
     R, C = board.rows, board.cols
     j, i = np.divmod(targets, C)
-    offs = np.array([(dj, di) for dj in range(-reach, reach + 1) for di in range(-reach, reach + 1)
-                     if (dj, di) != (0, 0)])
+    offs, PP = _offsets(reach)
     nj, ni = j[:, None] + offs[:, 0], i[:, None] + offs[:, 1]
     valid = (nj >= 0) & (nj < R) & (ni >= 0) & (ni < C)
     nb = np.where(valid, nj * C + ni, 0)
@@ -813,22 +822,26 @@ def _local_homography_at(c: np.ndarray, board: Board, reach: int, exclude: np.nd
     n = valid.sum(1)
     # pixel coordinates relative to the neighbours' mean, scaled to about 1 (conditioning)
     p = c[nb]
-    m = valid[..., None].astype(np.float64)
-    centre = (p * m).sum(1) / np.maximum(n, 1)[:, None]
-    scale = np.sqrt((((p - centre[:, None]) ** 2).sum(-1) * valid).sum(1) / np.maximum(n, 1))
-    scale = np.maximum(scale, 1e-9)
-    q = (p - centre[:, None]) / scale[:, None, None]
-    x = np.broadcast_to(offs[None, :, 1].astype(np.float64), q.shape[:2])
-    y = np.broadcast_to(offs[None, :, 0].astype(np.float64), q.shape[:2])
-    one, zero = np.ones_like(x), np.zeros_like(x)
+    wt = valid.astype(np.float64)
+    centre = np.einsum("tk,tkd->td", wt, p) / np.maximum(n, 1)[:, None]
+    q = p - centre[:, None]
+    scale = np.maximum(np.sqrt(np.einsum("tk,tkd,tkd->t", wt, q, q) / np.maximum(n, 1)), 1e-9)
+    q /= scale[:, None, None]
     u, v = q[..., 0], q[..., 1]
-    r1 = np.stack([x, y, one, zero, zero, zero, -u * x, -u * y, -u], axis=-1)
-    r2 = np.stack([zero, zero, zero, x, y, one, -v * x, -v * y, -v], axis=-1)
-    A = np.concatenate([r1, r2], axis=1) * np.concatenate([valid, valid], axis=1)[..., None]
+    # the DLT's normal matrix A^T A, with the rows (x, y, 1, 0, 0, 0, -u x, -u y, -u) and
+    # (0, 0, 0, x, y, 1, -v x, -v y, -v) of each valid neighbour, in 3x3 blocks of sums of P P^T
+    # (P = (x, y, 1)) weighted by 1, -u, -v and u^2 + v^2
+    s1, su, sv, suv = (w @ PP for w in (wt, wt * u, wt * v, wt * (u * u + v * v)))
+    M = np.zeros((len(targets), 9, 9))
+    M[:, 0:3, 0:3] = M[:, 3:6, 3:6] = s1.reshape(-1, 3, 3)
+    M[:, 0:3, 6:9] = -su.reshape(-1, 3, 3)
+    M[:, 3:6, 6:9] = -sv.reshape(-1, 3, 3)
+    M[:, 6:9, 0:3] = M[:, 0:3, 6:9].transpose(0, 2, 1)
+    M[:, 6:9, 3:6] = M[:, 3:6, 6:9].transpose(0, 2, 1)
+    M[:, 6:9, 6:9] = suv.reshape(-1, 3, 3)
     # least squares with the homography's last element fixed to 1 (the neighbours' centre maps to a
     # finite point): an 8x8 solve per corner, ten times faster than the null vector by eigh; a tiny
     # ridge keeps corners with too few neighbours (n < 4, no prediction) from making it singular
-    M = A.transpose(0, 2, 1) @ A
     ridge = 1e-12 * (np.trace(M, axis1=1, axis2=2)[:, None, None] + 1.0) * np.eye(8)
     h = np.linalg.solve(M[:, :8, :8] + ridge, -M[:, :8, 8:9])[..., 0]
     # evaluate at the corner's own index, offset (0, 0)
@@ -926,7 +939,7 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     wandered = np.linalg.norm(c - raw, axis=1) > np.maximum(radius, 0.5 * square)
     c[wandered] = raw[wandered]
     coarse &= ~wandered
-    tol = grid_tolerance(raw, board)
+    tol = np.maximum(GRID_TOLERANCE_PX, GRID_TOLERANCE_FRACTION * square)  # grid_tolerance(raw, board)
     bad = _inner_disagreement(c, board) > tol
     if bad.any():
         # predict the disagreeing corners from the others (their own positions are not trusted)
@@ -984,12 +997,10 @@ def _polish(gray: np.ndarray, corners: np.ndarray, board: Board, skip, sigma):
     c = np.asarray(corners, dtype=np.float64).reshape(-1, 2).copy()
     if sigma <= 0:
         return c, np.zeros(len(c), dtype=bool)
-    g = c.reshape(board.rows, board.cols, 2)
-    spacing = max(float(np.linalg.norm(np.diff(g, axis=1), axis=2).max(initial=0.0)),
-                  float(np.linalg.norm(np.diff(g, axis=0), axis=2).max(initial=0.0)))
-    img = refine_image(gray, c, spacing + 2.0, sigma)  # windows are smaller than a square
     radius = corner_windows(c, board, margin=WINDOW_MARGIN_PX + sigma)
-    p = _subpix(img, c, radius, POLISH_CRITERIA)
+    # cornerSubPix reads 1 px beyond its window, bilinearly: the smoothing must be exact that far
+    img = refine_image(gray, c, float(radius.max(initial=0)) + 3.0, sigma)
+    p = _subpix(img, c, radius)
     use = np.linalg.norm(p - c, axis=1) < POLISH_MAX_MOVE_PX
     if skip is not None:
         use &= ~np.asarray(skip, dtype=bool)
