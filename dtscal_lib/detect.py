@@ -418,8 +418,9 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     edge, where a single square's corner meets the white margin, gives weaker saddles one step out; equally
     strong ones mean a window of a bigger grid: None; see :data:`LATTICE_RING_RATIO`).
     Corners come out in a row-major order of the board at the sub-pixel saddles' precision (``cand.fine``,
-    about 0.1-0.2 px: :func:`_saddles`; the walk itself uses the peak pixels); :func:`_finish` orders, refines and checks them as it does the classic detector's, and where its checks
-    fail the classic detector still runs.
+    about 0.1-0.2 px: :func:`_saddles`; the walk itself uses the peak pixels); :func:`_finish` orders,
+    refines and checks them as it does the classic detector's, and where its checks fail the classic
+    detector still runs.
 
     Measured: the lattice gives the board in 24 of 26 views of ``data/real`` and 339 of the 353 detections of
     the recorded session, saving the classic detector's 3-10 ms per view; the refined corners agree with
