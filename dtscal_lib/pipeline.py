@@ -104,7 +104,7 @@ def usable_images(frames: Iterable[Frame], tally: FrameTally, size: tuple[int, i
     for frame in frames:
         tally.total += 1
         if frame.error is not None or frame.image is None:
-            tally.reject(getattr(frame.error, "reason", None) or Reason.UNREADABLE)
+            tally.reject(frame.error.reason)
             continue
         img = frame.image
         if img.ndim < 2 or img.size == 0:
@@ -302,7 +302,7 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         try:
             det = detect_board(img, board)
         except DtscalError as exc:  # a frame the detector cannot take: count it, go on
-            group.tally.reject(getattr(exc, "reason", None) or Reason.BAD_FRAME)
+            group.tally.reject(exc.reason or Reason.BAD_FRAME)
             continue
         except cv2.error:  # OpenCV choking on one odd frame must not end the run
             group.tally.reject(Reason.DETECTOR_ERROR)
@@ -421,7 +421,7 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
         try:
             res = fit_on_image(img, camera, board)
         except DtscalError as exc:  # counted under the frame's own reason (size, NaN, board, homography)
-            tally.reject(getattr(exc, "reason", None) or Reason.HOMOGRAPHY_FAILED)
+            tally.reject(exc.reason or Reason.HOMOGRAPHY_FAILED)
             last_error = exc
             continue
         except cv2.error as exc:  # OpenCV choking on one odd frame must not end the run

@@ -53,20 +53,19 @@ def _case_depth(fn):
     expect_close(_call(fn, K_DUCKIE, R, t, X, 3), want, 1e-9, "pixels of points in front of an unmoved camera")
 
 
-def _case_pose(fn):
-    rng = np.random.default_rng(101)
-    R, t = random_board_pose(rng)
-    uv = np.column_stack([rng.uniform(20, 620, 6), rng.uniform(20, 460, 6)])
-    X = points_on_rays(K_DUCKIE, R, t, uv, rng.uniform(0.3, 1.5, 6))
-    expect_close(_call(fn, K_DUCKIE, R, t, X, 6), uv, 1e-8, "pixels of points seen by a rotated, moved camera")
+def _case_on_rays(K, seed: int, n: int, what: str):
+    """A case of ``n`` points put on the rays of known pixels (random pose and depths) by a camera ``K``."""
+    def case(fn):
+        rng = np.random.default_rng(seed)
+        R, t = random_board_pose(rng)
+        uv = np.column_stack([rng.uniform(20, 620, n), rng.uniform(20, 460, n)])
+        X = points_on_rays(K, R, t, uv, rng.uniform(0.3, 1.5, n))
+        expect_close(_call(fn, K, R, t, X, n), uv, 1e-8, what)
+    return case
 
 
-def _case_skew(fn):
-    rng = np.random.default_rng(102)
-    R, t = random_board_pose(rng)
-    uv = np.column_stack([rng.uniform(20, 620, 8), rng.uniform(20, 460, 8)])
-    X = points_on_rays(K_SKEWED, R, t, uv, rng.uniform(0.3, 1.5, 8))
-    expect_close(_call(fn, K_SKEWED, R, t, X, 8), uv, 1e-8, "pixels with a skewed K")
+_case_pose = _case_on_rays(K_DUCKIE, 101, 6, "pixels of points seen by a rotated, moved camera")
+_case_skew = _case_on_rays(K_SKEWED, 102, 8, "pixels with a skewed K")
 
 
 def _case_opencv(fn):
