@@ -202,7 +202,7 @@ def _pattern_outline(board: Board, n: int = 24) -> np.ndarray:
 
 
 def _sheet_outline(board: Board, sheet: Sheet, n: int = 24) -> np.ndarray:
-    cx, cy = (board.cols - 1) * board.square / 2, (board.rows - 1) * board.square / 2
+    cx, cy = board.centre[:2]
     t = np.linspace(0.0, 1.0, n, endpoint=False)
     x0, x1 = cx - sheet.width / 2, cx + sheet.width / 2
     y0, y1 = cy - sheet.height / 2, cy + sheet.height / 2
@@ -320,7 +320,7 @@ def _sheet_texture(bx: np.ndarray, by: np.ndarray, ok: np.ndarray, board: Board,
     each sub-pixel's footprint, then the sub-pixels are area-averaged by the caller.
     """
     s = board.square
-    cx, cy = (board.cols - 1) * s / 2, (board.rows - 1) * s / 2
+    cx, cy = board.centre[:2]
     on_paper = ok & (np.abs(bx - cx) <= sheet.width / 2) & (np.abs(by - cy) <= sheet.height / 2)
     u, v = bx / s, by / s  # in squares; squares occupy u in [-1, cols], v in [-1, rows]
     wu = np.where(ok, _footprint(u), 1.0)
@@ -727,8 +727,7 @@ def _pose_from_params(camera: CameraModel, board: Board, p) -> tuple[np.ndarray,
     xb /= np.linalg.norm(xb)
     R_face = np.column_stack([xb, np.cross(zb, xb), zb])
     R = R_face @ _rot("z", roll) @ _rot("y", yaw) @ _rot("x", pitch)
-    centre = np.array([(board.cols - 1) * board.square / 2, (board.rows - 1) * board.square / 2, 0.0])
-    return R, C - R @ centre
+    return R, C - R @ board.centre
 
 
 @dataclass(frozen=True)
@@ -805,7 +804,7 @@ def intrinsic_session(seed: int = DEFAULT_SEED, *, frames: Iterable[int] | None 
         if pa is not None and pb is not None:
             Ra, ta = _pose_from_params(camera, board, np.asarray(pa) + tremor((i - half) / fps))
             Rb, tb = _pose_from_params(camera, board, np.asarray(pb) + tremor((i + half) / fps))
-            centre = np.array([[(board.cols - 1) * board.square / 2, (board.rows - 1) * board.square / 2, 0.0]])
+            centre = board.centre[None, :]
             try:
                 ua = project_points(centre, Ra, ta, camera.K, camera.dist)[0]
                 ub = project_points(centre, Rb, tb, camera.K, camera.dist)[0]
