@@ -77,10 +77,11 @@ MIN_POINTS_PER_VIEW = 4
 MIN_VIEWS = 3
 #: relative singular value below which the stacked Zhang constraints count as rank deficient
 _PARALLEL_VIEWS_TOL = 2e-3
-#: boards whose recovered normals all lie within this angle (degrees) of their mean are "parallel"
-MIN_TILT_SPREAD_DEG = 3.0
-#: a focal length whose standard deviation exceeds this fraction of it is not determined
-MAX_RELATIVE_FOCAL_STD = 0.25
+#: boards whose recovered normals all lie within this angle (degrees) of their mean are "parallel";
+#: a focal length whose standard deviation exceeds this fraction of it is not determined (limits of the
+#: mathematics, named apart from the beliefs in the one table: dtscal_lib.limits)
+from .limits import FOCAL_STD_UNDETERMINED as MAX_RELATIVE_FOCAL_STD  # noqa: E402
+from .limits import MIN_TILT_SPREAD_DEG  # noqa: E402
 #: the extent of a view's object points, in their unit: a board, not an atom or a planet
 OBJECT_EXTENT_RANGE = (1e-6, 1e6)
 #: image points may lie this fraction of the image size outside it (a detector never does)

@@ -3,6 +3,7 @@
 Sub-commands::
 
     dtscal course                  open the course in JupyterLab (the student's workspace/; --instructor: solutions/)
+    dtscal handin                  zip the student's workspace notebooks into handin/NAME.zip
     dtscal synth --out data        regenerate the synthetic recorded Duckiebot session
     dtscal calibrate-intrinsics    frames -> camera_intrinsic/<ROBOT>.yaml
     dtscal calibrate-extrinsics    one frame on the board -> camera_extrinsic/<ROBOT>.yaml
@@ -21,9 +22,10 @@ import argparse
 import json
 import os
 import sys
+import warnings
 from pathlib import Path
 
-from .errors import DtscalError, ImplausibleCalibrationError
+from .errors import CalibrationFileWarning, DtscalError, ImplausibleCalibrationError
 
 #: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
 EXIT_REFUSED = 3
@@ -218,7 +220,7 @@ def cmd_release(args) -> int:
         print("notebooks/ matches solutions/")
         return 0
     if args.execute:
-        for p in release.execute_solutions(root / "solutions"):
+        for p in release.execute_solutions(root / "solutions", progress=True):
             print(f"executed {p}")
     if args.write or args.execute:
         for p in release.generate_notebooks(root / "solutions", root / "notebooks"):
@@ -246,6 +248,17 @@ def cmd_course(args) -> int:
     print("starting JupyterLab:", " ".join(cmd), file=sys.stderr)
     os.execv(sys.executable, cmd)
     return 0  # pragma: no cover
+
+
+def cmd_handin(args) -> int:
+    from .course import handin
+    from .paths import repo_root
+
+    path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
+    print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
+    print("hand in this file (upload it to Gradescope, or as your instructor says); with GitHub Classroom, "
+          "commit and push instead: git add workspace && git commit -m 'hand in' && git push")
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -316,6 +329,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
     sp.set_defaults(func=cmd_course)
 
+    sp = sub.add_parser("handin", help="zip your workspace notebooks into handin/NAME.zip to hand in")
+    sp.add_argument("--name", help="your name, for the file name (default: git's user.name, else your login)")
+    sp.add_argument("--out", metavar="FILE.zip", help="where to write the zip (default handin/NAME.zip)")
+    sp.set_defaults(func=cmd_handin)
+
     try:
         from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
     except ModuleNotFoundError:  # the student hand-out ships without the grader
@@ -335,17 +353,28 @@ def _no_grader(args) -> int:
 def release_args(sp) -> None:
     sp.add_argument("out", nargs="?", help="folder to write the student release into")
     sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
-    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/")
+    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/ (seconds; enough "
+                    "after a change to text or code that leaves the stored outputs as they are)")
     sp.add_argument("--execute", action="store_true",
                     help="re-run every solution notebook (storing its outputs), then regenerate notebooks/")
     sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")
     sp.set_defaults(func=cmd_release)
 
 
+def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    if issubclass(category, CalibrationFileWarning):
+        print(f"dtscal: warning: {message}", file=sys.stderr)
+    else:
+        print(warnings.formatwarning(message, category, filename, lineno, line), end="", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():  # a file read as Duckietown reads it, with a remark: one line, no traceback
+            warnings.simplefilter("always", CalibrationFileWarning)
+            warnings.showwarning = _print_warning
+            return int(args.func(args) or 0)
     except ImplausibleCalibrationError as exc:
         print(f"dtscal: error: {_cli_wording(str(exc))}", file=sys.stderr)
         return EXIT_REFUSED

@@ -245,7 +245,7 @@ class IntrinsicRun:
             frames=self.tally.to_dict(),
             coverage={b.name: round(float(b.progress), 4) for b in self.bars},
             output=str(self.path) if self.path else None,
-            doubts=list(self.doubts),
+            doubts=[str(d) for d in self.doubts],
         )
         return out
 
@@ -386,7 +386,7 @@ class ExtrinsicRun:
             "frames": self.tally.to_dict(),
             "output": str(self.path) if self.path else None,
             "camera_pose": dict(self.camera_pose),
-            "doubts": list(self.doubts),
+            "doubts": [str(d) for d in self.doubts],
         }
 
 
@@ -432,7 +432,8 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
         run = ExtrinsicRun(robot_name, res.H, frame.index, tally, np.asarray(res.residual_mm),
                            np.asarray(res.image_center_ground), src.describe(),
                            camera_pose=camera_pose_from_homography(res.H, camera.P[:, :3]),
-                           doubts=ground_homography_doubts(res.H, camera.P[:, :3]))
+                           doubts=ground_homography_doubts(res.H, camera.P[:, :3], board=board,
+                                                           pattern_contrast=res.pattern_contrast))
         if run.doubts:
             run.path = _refuse_or_keep(run.doubts, "extrinsic", robot_name, out_dir, keep_anyway,
                                        lambda rejected, H=res.H: calib_files.save_extrinsics(H, out_dir, robot_name,

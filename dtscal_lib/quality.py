@@ -51,12 +51,13 @@ hold the board next in the ... of the image (filling it, tilted), where the unce
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from .camera import pixel_to_normalized, project_points, undistort_normalized
+from .findings import Finding
 
 __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "residuals", "grid_indices",
            "projection_uncertainty", "image_region", "REGION_NAMES"]
@@ -82,7 +83,8 @@ SYSTEMATIC_RATIO_BAD = 2.0
 #: fewer views than this cannot tell a bad view from the rest
 MIN_GOOD_VIEWS = 6
 #: largest angle between a board normal and the mean normal, degrees: below the first bad, the second doubtful
-TILT_BAD_DEG, TILT_DOUBTFUL_DEG = 10.0, 20.0
+#: (rows of the one table of belief, with the refusal's limit: dtscal_lib.limits)
+from .limits import TILT_BAD_DEG, TILT_DOUBTFUL_DEG  # noqa: E402
 #: mean 1-sigma projection uncertainty at the image corners, pixels: above the first doubtful, the second bad
 #: (the image corners are extrapolated: no board corner is ever detected there)
 CORNER_SIGMA_DOUBTFUL, CORNER_SIGMA_BAD = 1.0, 4.0
@@ -93,32 +95,6 @@ _SEVERITY = {"good": 0, "doubtful": 1, "bad": 2}
 
 
 # =========================================================================== data types
-@dataclass
-class Finding:
-    """One reason for the verdict.
-
-    code : short identifier (``fit``, ``outlier_views``, ``column_offset``, ``row_offset``, ``radial``,
-        ``neighbour_correlation``, ``few_views``, ``parallel_views``, ``uncertainty``)
-    severity : ``"doubtful"`` or ``"bad"``
-    message : what is wrong, with the numbers
-    advice : what to do about it
-    views : indices of the views concerned (into the result's views), when it is about views
-    """
-
-    code: str
-    severity: str
-    message: str
-    advice: str
-    views: list[int] = field(default_factory=list)
-
-    def to_dict(self) -> dict:
-        return {"code": self.code, "severity": self.severity, "message": self.message, "advice": self.advice,
-                "views": [int(v) for v in self.views]}
-
-    def warning(self) -> str:
-        return f"calibration {self.severity}: {self.message}; what to do: {self.advice}"
-
-
 @dataclass
 class UncertaintyMap:
     """1-sigma projection uncertainty (worst direction, pixels) on a grid of pixels.

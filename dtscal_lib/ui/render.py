@@ -136,7 +136,8 @@ def source_status_html(spec: str, status, bad: dict, kept: str) -> str:
     ``kept`` says what survives a lost source (``"Every sample is kept"``); ``bad`` counts the
     skipped frames by reason.
     """
-    text = {"connecting": f"connecting to {spec} ...",
+    waiting = status.state == "connecting" and status.message and not status.message.startswith("connecting to ")
+    text = {"connecting": f"waiting for {spec}: {status.message}" if waiting else f"connecting to {spec} ...",
             "running": f"live: {spec}",
             "ended": f"source ended: {status.message}. {kept}; RECONNECT to go on.",
             "error": f"source lost: {status.message}. {kept}; RECONNECT when it is back."}.get(
