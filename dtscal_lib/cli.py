@@ -53,7 +53,7 @@ def _report_doubts(run) -> int:
     print("dtscal: warning: the kit does not believe this calibration:", file=sys.stderr)
     for d in run.doubts:
         print(f"  - {d}", file=sys.stderr)
-    where = f"kept as {run.path}" if run.path else "nothing written (--no-write)"
+    where = f"kept as {run.path}" if run.path else "nothing written (--no-write)"  # written unless --no-write
     print(f"dtscal: --keep-anyway: {where}; the robot's own file is unchanged", file=sys.stderr)
     return EXIT_REFUSED
 
@@ -85,9 +85,7 @@ def _master(args) -> None:
 
 
 def cmd_calibrate_intrinsics(args) -> int:
-    from .pipeline import calibrate_intrinsics
-
-    from .pipeline import parse_image_size
+    from .pipeline import calibrate_intrinsics, parse_image_size
 
     _master(args)
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
@@ -125,47 +123,28 @@ def cmd_calibrate_intrinsics(args) -> int:
 
 
 def _commit(args, run, kind: str):
-    """--commit: send the written file (or a temporary one with --no-write) to the robot; (reply, CommitError)."""
+    """--commit: send the result to the robot through its session; (reply, CommitError)."""
     from .robot import CommitError
 
     if not args.commit or run.doubts:  # a result the kit refused is never sent to the robot
         return None, None
     try:
-        return _send(args, run, kind), None
+        if kind == "intrinsics":
+            return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout), None
+        return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout, url=args.upload_url,
+                                  fmt=args.format), None
     except CommitError as exc:
         return None, exc
 
 
-def _send(args, run, kind: str) -> str:
-    import tempfile
-
-    from . import calib_files, robot
-
-    path = run.path
-    if path is None:  # --no-write: the robot still needs a file to read from
-        tmp = tempfile.mkdtemp(prefix="dtscal-commit-")
-        path = (calib_files.save_intrinsics(calib_files.IntrinsicCalibration.from_camera(
-                    run.result.camera(), camera_name=f"/{run.robot}/camera_node"), tmp, run.robot)
-                if kind == "intrinsics" else calib_files.save_extrinsics_as(
-                    run.H, tmp, run.robot, fmt=args.format, intrinsics=args.intrinsics))
-    if kind == "intrinsics":
-        return robot.commit_intrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout)
-    return robot.commit_extrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout,
-                                   url=args.upload_url)
-
-
 def cmd_calibrate_extrinsics(args) -> int:
-    from . import calib_files
     from .pipeline import calibrate_extrinsics
 
     _master(args)
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
-                               out_dir=None if args.no_write or args.format != "classic" else args.out,
+                               out_dir=None if args.no_write else args.out, fmt=args.format,
                                topic=args.topic, progress=_progress(not args.quiet, "frames"),
                                keep_anyway=args.keep_anyway, max_seconds=args.max_seconds)
-    if args.format != "classic" and not args.no_write and not run.doubts:
-        run.path = calib_files.save_extrinsics_as(run.H, args.out, run.robot, fmt=args.format,
-                                                  intrinsics=args.intrinsics)
     committed, failed = _commit(args, run, "extrinsics")
     if args.json:
         _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
