@@ -31,19 +31,31 @@ if [ "$(id -u)" -ne 0 ]; then
 fi
 
 export DEBIAN_FRONTEND=noninteractive
-# another apt/dpkg (unattended upgrades, a parallel setup) may hold the lock: wait, do not fail
-APT=(apt-get -o DPkg::Lock::Timeout=600)
-lock_note() {
-    if command -v fuser >/dev/null 2>&1 && fuser /var/lib/dpkg/lock-frontend >/dev/null 2>&1; then
-        echo "install-mrcal: another apt/dpkg holds the package lock; waiting for it (up to 10 minutes)"
-    fi
+# Another apt/dpkg (unattended upgrades, a parallel setup) may hold a lock: wait, saying so, never fail
+# at once. apt-get install waits by itself with DPkg::Lock::Timeout (printing "Waiting for cache lock");
+# apt-get update does not honour it for the lists lock, so it is retried here.
+WAIT=600
+APT=(apt-get -o DPkg::Lock::Timeout=$WAIT)
+
+apt_update_waiting() {
+    local start=$SECONDS err
+    while true; do
+        if err=$($SUDO "${APT[@]}" update 2>&1 >/dev/null); then
+            return 0
+        fi
+        if ! grep -q 'Could not get lock\|Unable to lock' <<<"$err" || [ $((SECONDS - start)) -ge $WAIT ]; then
+            echo "$err" >&2
+            return 1
+        fi
+        echo "install-mrcal: another apt/dpkg holds the package-list lock; waiting ($((SECONDS - start)) s of at most $WAIT s)"
+        sleep 5
+    done
 }
 
 # refresh the package lists only when apt does not know the package yet
 if ! apt-cache policy python3-mrcal 2>/dev/null | grep -q 'Candidate: [0-9]'; then
     echo "install-mrcal: apt does not know python3-mrcal yet; running apt-get update"
-    lock_note
-    $SUDO "${APT[@]}" update
+    apt_update_waiting
 fi
 
 missing=()
@@ -54,8 +66,7 @@ for p in "${PACKAGES[@]}"; do
 done
 
 if [ "${#missing[@]}" -gt 0 ]; then
-    echo "install-mrcal: installing ${missing[*]}"
-    lock_note
+    echo "install-mrcal: installing ${missing[*]} (if another apt/dpkg holds the lock, apt waits up to $WAIT s and says so)"
     $SUDO env DEBIAN_FRONTEND=noninteractive "${APT[@]}" install -y --no-install-recommends "${missing[@]}"
 fi
 
