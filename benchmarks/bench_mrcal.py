@@ -210,7 +210,8 @@ def print_comparison(c: dict) -> None:
           f" {_f(r['std_noise'].values(), '{:5.2f}'):>30s}")
     print(f"{'  the kit reports':28s} {_f(k['std'].values()):>34s} {'':34s} {_f(r['std'].values(), '{:5.2f}'):>30s}")
     print(f"projection 1 sigma (worst direction, px) at {c['distance']:.3f} m: {', '.join(c['places'])}")
-    print(f"{'  noise model':28s} {_f(k['proj_noise']):>34s} {_f(m['proj']):>34s} {_f(r['proj_noise'], '{:5.2f}'):>30s}")
+    print(f"{'  noise model':28s} {_f(k['proj_noise']):>34s} {_f(m['proj']):>34s}"
+          f" {_f(r['proj_noise'], '{:5.2f}'):>30s}")
     print(f"{'  the kit reports':28s} {_f(k['proj']):>34s} {'':34s} {_f(r['proj'], '{:5.2f}'):>30s}")
 
 
