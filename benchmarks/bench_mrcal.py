@@ -29,7 +29,7 @@ computes (so kit/mrcal should be ~1: mrcal's sigma is ``std(residuals)``, the ki
 Run::
 
     bash scripts/install-mrcal.sh          # once (root or sudo)
-    .venv/bin/python benchmarks/bench_mrcal.py [--quick] [--regularization] [--json OUT.json]
+    .venv/bin/python benchmarks/bench_mrcal.py [--quick] [--regularization] [--json] [--check]
 
 ``--quick``: the left camera and the OPENCV4 pair only.
 """
@@ -63,6 +63,24 @@ MRCAL_PYTHON = os.environ.get("DTSCAL_MRCAL_PYTHON", "/usr/bin/python3")
 LENSMODELS = {False: "LENSMODEL_OPENCV5", True: "LENSMODEL_OPENCV4"}  # key: fix_k3
 CORE = ("fx", "fy", "cx", "cy")
 PLACES = ("centre", "top-left", "top-right", "bottom-left", "bottom-right")
+
+# Agreement bounds (``--check`` and tests/test_mrcal_peer.py), each from what this benchmark measured on
+# left and right, OPENCV4 and OPENCV5 (measured -> bound):
+#: fx, fy, cx, cy: |kit/mrcal - 1|, measured <= 2.7e-8 (the same minimum); room for either stopping rule
+INTRINSICS_REL = 1e-5
+#: distortion coefficients, absolute, measured <= 3.4e-7
+DISTORTION_ABS = 1e-5
+#: RMS, relative, measured < 1e-9
+RMS_REL = 1e-6
+#: residual sigma: kit/mrcal against sqrt(2N / (2N - p)) (mrcal: std of the residuals; the kit:
+#: sqrt(|e|^2 / (2N - p))), measured 1.0321 / 1.0325 equal to it within 1e-4
+SIGMA_DEF_REL = 1e-3
+#: the noise-model sigma of fx..cy and projection uncertainty, kit/mrcal / the sigma ratio, measured 1 within 1.1e-6
+NOISE_MODEL_REL = 1e-4
+#: what the kit reports / mrcal's sigma: measured 1.58-3.81 (intrinsics), 1.27-2.58 (projection); bound: the
+#: measured maximum times 1.2 (the relative uncertainty of a spread over 13 views, 1 / sqrt(2 * 12))
+KIT_STD_MAX = 4.6  # 3.81 x 1.2
+KIT_PROJ_MAX = 3.1  # 2.58 x 1.2
 
 
 class MrcalMissing(RuntimeError):
@@ -188,6 +206,36 @@ def compare(side: str, *, fix_k3: bool = True, regularization: bool = False) -> 
             "distance": distance, "places": list(PLACES), "kit": kit, "mrcal": mc, "ratio": ratio}
 
 
+def disagreements(c: dict) -> list[str]:
+    """What of :func:`compare`'s answer breaks the agreement bounds above (empty: none)."""
+    kit, mr, r = c["kit"], c["mrcal"], c["ratio"]
+    bad = []
+    for n in CORE:
+        if not abs(r["intrinsics"][n] - 1) < INTRINSICS_REL:
+            bad.append(f"{n}: kit/mrcal {r['intrinsics'][n]:.9f}, bound 1 +- {INTRINSICS_REL:g}")
+    for n in kit["intrinsics"]:
+        if n not in CORE and not abs(kit["intrinsics"][n] - mr["intrinsics"][n]) < DISTORTION_ABS:
+            bad.append(f"{n}: kit {kit['intrinsics'][n]:.7f}, mrcal {mr['intrinsics'][n]:.7f}")
+    if not abs(r["rms"] - 1) < RMS_REL:
+        bad.append(f"RMS: kit/mrcal {r['rms']:.9f}")
+    two_n, p = 2 * c["n_corners"], len(kit["intrinsics"]) + 6 * c["n_views"]
+    expected = float(np.sqrt(two_n / (two_n - p)))
+    if not abs(r["sigma"] / expected - 1) < SIGMA_DEF_REL:
+        bad.append(f"residual sigma: kit/mrcal {r['sigma']:.5f}, expected sqrt(2N/(2N-p)) = {expected:.5f}")
+    noise = [r["std_noise"][n] / r["sigma"] for n in CORE] + [x / r["sigma"] for x in r["proj_noise"]]
+    if not np.all(np.abs(np.asarray(noise) - 1) < NOISE_MODEL_REL):
+        bad.append(f"noise model: kit/mrcal / sigma ratio {np.round(noise, 6).tolist()}, "
+                   f"bound 1 +- {NOISE_MODEL_REL:g}")
+    floor = r["sigma"] * (1 - 1e-6)
+    if not all(floor <= r["std"][n] < KIT_STD_MAX for n in CORE):
+        bad.append(f"reported sigma / mrcal {[round(r['std'][n], 3) for n in CORE]} "
+                   f"outside [{floor:.3f}, {KIT_STD_MAX}]")
+    if not all(floor <= x < KIT_PROJ_MAX for x in r["proj"]):
+        bad.append(f"reported projection / mrcal {np.round(r['proj'], 3).tolist()} "
+                   f"outside [{floor:.3f}, {KIT_PROJ_MAX}]")
+    return bad
+
+
 def _f(v, fmt="{:.3f}") -> str:
     return " ".join(fmt.format(x) for x in v)
 
@@ -219,21 +267,28 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="left camera, OPENCV4 only")
     ap.add_argument("--regularization", action="store_true", help="mrcal with its default regularisation")
-    ap.add_argument("--json", help="also write every figure to this JSON file")
+    ap.add_argument("--json", action="store_true", help="print every figure as JSON instead of the tables")
+    ap.add_argument("--check", action="store_true", help="exit 1 if an agreement bound is broken")
     a = ap.parse_args(argv)
     problem = mrcal_problem()
     if problem:
         print(f"bench_mrcal: {problem}", file=sys.stderr)
         return 2
     runs = [("left", True)] if a.quick else [(s, k3) for k3 in (True, False) for s in ("left", "right")]
-    out = []
+    out, broken = [], []
     for side, fix_k3 in runs:
         c = compare(side, fix_k3=fix_k3, regularization=a.regularization)
-        print_comparison(c)
+        if not a.json:
+            print_comparison(c)
         out.append(c)
+        broken += [f"{side} {c['lensmodel']}: {b}" for b in disagreements(c)]
     if a.json:
-        Path(a.json).write_text(json.dumps(out, indent=1))
-    return 0
+        print(json.dumps(out, indent=1))
+    elif not a.regularization:  # the bounds are for the unregularised, identical cost function
+        print("\nagreement bounds (tests/test_mrcal_peer.py): " + ("all hold" if not broken else "BROKEN"))
+        for b in broken:
+            print(f"  {b}")
+    return 1 if a.check and broken and not a.regularization else 0
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ Bounds, from what bench_mrcal.py measured (left and right, LENSMODEL_OPENCV4 and
 * what the kit reports (the larger of the noise model and a CR2 sandwich over views,
   docs/uncertainty.md): sigma of fx, fy, cx, cy measured 1.58-3.81x mrcal's, the projection
   uncertainty 1.27-2.58x. Bound: never below mrcal's noise model (times the sigma ratio), and at most
-  4.5x for the intrinsics and 3.5x for the projection (the measured maxima plus about 20 %, the
+  4.6x for the intrinsics and 3.1x for the projection (the measured maxima times 1.2, the
   relative uncertainty of a spread over 13 views, 1/sqrt(2*12)).
 """
 
@@ -35,15 +35,7 @@ import pytest
 from ci import missing
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_mrcal.py"
-
-#: bounds, see the module docstring (measured value -> bound)
-INTRINSICS_REL = 1e-5  # measured 2.7e-8
-DISTORTION_ABS = 1e-5  # measured 3.4e-7
-RMS_REL = 1e-6  # measured < 1e-9
-SIGMA_DEF_REL = 1e-3  # measured 1e-4 from sqrt(2N / (2N - p))
-NOISE_MODEL_REL = 1e-4  # measured 1.1e-6
-KIT_STD_MAX = 4.5  # measured 1.58-3.81
-KIT_PROJ_MAX = 3.5  # measured 1.27-2.58
+# the bounds live next to their measurements in benchmarks/bench_mrcal.py (INTRINSICS_REL ... KIT_PROJ_MAX)
 
 
 @pytest.fixture(scope="module")
@@ -73,32 +65,29 @@ def test_kit_agrees_with_mrcal_on_the_same_corners(bench, side, fix_k3):
     msg = f"{side} {c['lensmodel']}: kit {kit}, mrcal {mr}"
     assert c["n_views"] == 13 and c["n_corners"] == 13 * 54, msg
     assert c["lensmodel"] == ("LENSMODEL_OPENCV4" if fix_k3 else "LENSMODEL_OPENCV5")
-    # the calibration: the same minimum
-    for name in bench.CORE:
-        assert abs(ratio["intrinsics"][name] - 1) < INTRINSICS_REL, (name, msg)
     dist = [n for n in kit["intrinsics"] if n not in bench.CORE]
     assert dist == (["k1", "k2", "p1", "p2"] if fix_k3 else ["k1", "k2", "p1", "p2", "k3"]), msg
-    for name in dist:
-        assert abs(kit["intrinsics"][name] - mr["intrinsics"][name]) < DISTORTION_ABS, (name, msg)
-    assert abs(ratio["rms"] - 1) < RMS_REL, msg
-    # the residual sigma: the same residuals, two definitions
-    two_n, p = 2 * c["n_corners"], len(kit["intrinsics"]) + 6 * c["n_views"]
-    sigma_ratio = ratio["sigma"]
-    assert abs(sigma_ratio / np.sqrt(two_n / (two_n - p)) - 1) < SIGMA_DEF_REL, msg
-    # the noise model: mrcal's covariance and propagation, exactly
-    for name in bench.CORE:
-        assert abs(ratio["std_noise"][name] / sigma_ratio - 1) < NOISE_MODEL_REL, (name, msg)
-    proj_noise = np.asarray(ratio["proj_noise"]) / sigma_ratio
-    assert len(proj_noise) == len(bench.PLACES) == 5
-    assert np.all(np.abs(proj_noise - 1) < NOISE_MODEL_REL), msg
-    # what the kit reports: at least mrcal's noise model, at most the measured excess plus 20 %
-    for name in bench.CORE:
-        assert sigma_ratio * (1 - 1e-6) <= ratio["std"][name] < KIT_STD_MAX, (name, msg)
-    proj = np.asarray(ratio["proj"])
-    assert np.all(proj >= sigma_ratio * (1 - 1e-6)) and np.all(proj < KIT_PROJ_MAX), msg
+    assert list(mr["intrinsics"]) == list(kit["intrinsics"]), msg
+    assert len(ratio["proj"]) == len(ratio["proj_noise"]) == len(bench.PLACES) == 5, msg
+    # every bound: the same calibration, the same noise model, the kit's report at least that and at most
+    # the measured excess plus 20 %
+    assert bench.disagreements(c) == [], msg
     # the kit says which estimate it used
     assert "sandwich over the 13 views" in kit["std_method"], msg
 
+
+def test_a_broken_bound_is_reported(bench_module):
+    """disagreements() names what breaks: a focal length 0.01 % off, a noise model 1 % off, a sigma 5x mrcal's."""
+    ok = {"n_corners": 702, "n_views": 13,
+          "kit": {"intrinsics": {"fx": 500.05, "fy": 500.0, "cx": 320.0, "cy": 240.0, "k1": -0.3}},
+          "mrcal": {"intrinsics": {"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "k1": -0.3}}}
+    sig = float(np.sqrt(1404 / (1404 - 5 - 78)))
+    ok["ratio"] = {"intrinsics": {"fx": 1.0001, "fy": 1.0, "cx": 1.0, "cy": 1.0}, "rms": 1.0, "sigma": sig,
+                   "std_noise": {"fx": sig * 1.01, "fy": sig, "cx": sig, "cy": sig},
+                   "proj_noise": [sig] * 5, "std": {"fx": 5.0, "fy": 2.0, "cx": 2.0, "cy": 2.0}, "proj": [2.0] * 5}
+    bad = bench_module.disagreements(ok)
+    assert len(bad) == 3, bad
+    assert bad[0].startswith("fx: kit/mrcal 1.0001") and bad[1].startswith("noise model") and "5.0" in bad[2], bad
 
 def test_corners_are_given_to_mrcal_in_its_layout(bench_module):
     """Board point (col, row) * spacing -> corners[view, row, col]; a partial or off-grid board is refused."""
