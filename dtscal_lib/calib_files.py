@@ -750,14 +750,15 @@ def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | N
     return extrinsic_from_v2(F, calib, where), "2", None if date is None else str(date)
 
 
-def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None) -> Path:
+def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None,
+                       rejected: bool = False) -> Path:
     """Write ``camera_extrinsic/<robot>.yaml`` in the classic format (default) or as version ``"2"``.
 
     ``H`` is the classic homography; ``fmt="2"`` needs ``intrinsics`` (object or path) and stamps
-    ``date`` (default now, ISO 8601).
+    ``date`` (default now, ISO 8601). ``rejected`` writes ``<robot>.rejected.yaml`` beside, in either format.
     """
     if fmt == "classic":
-        return save_extrinsics(H, out_dir, robot)
+        return save_extrinsics(H, out_dir, robot, rejected=rejected)
     if fmt != "2":
         raise CalibrationFileError(f"extrinsic format {fmt!r} is unknown; use 'classic' or '2'")
     if intrinsics is None:
@@ -766,7 +767,7 @@ def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsi
 
     calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
     check_robot_name(robot)
-    path = extrinsic_path(out_dir, robot)
+    path = _target(extrinsic_path(out_dir, robot), rejected)
     F = extrinsic_to_v2(H, calib)
     stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
     text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})

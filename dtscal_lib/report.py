@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from .course.figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
+from .figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
 
 from .errors import DtscalError
 from .quality import REGION_NAMES, Quality, assess

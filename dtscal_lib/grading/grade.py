@@ -8,6 +8,7 @@ the sandbox (:mod:`.sandbox`), judge the answers against the references computed
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +16,7 @@ from pathlib import Path
 from ..selfcheck import diagnosis
 from .loader import Submission, load_submission, useful_import
 from .material import ASSIGNMENTS, Material
-from .sandbox import CPU_S, WALL_S, CheckRun, SandboxRun, run_calls
+from .sandbox import CPU_S, WALL_S, CheckRun, SandboxRun, run_calls, validate_limits
 
 NOT_IMPLEMENTED = "not implemented (the function still raises NotImplementedError)"
 
@@ -41,6 +42,8 @@ class FunctionResult:
     tests: list[TestResult] = field(default_factory=list)
     diagnosis: str = ""
     status: str = "graded"
+    #: the named mistake behind ``diagnosis``: (key, what is wrong, equation to revisit)
+    mistake: tuple | None = None
 
     @property
     def score(self) -> float:
@@ -74,6 +77,7 @@ class GradeResult:
 def grade_file(path, material: Material, assignment: str, *, student: str = "",
                wall_s: float = WALL_S, cpu_s: int = CPU_S, mem_mb: int | None = None) -> GradeResult:
     """Grade one notebook or .py file against ``assignment``; never raises on student code."""
+    validate_limits(wall_s, cpu_s, mem_mb)
     t0 = time.perf_counter()
     path = Path(path)
     res = GradeResult(str(path), assignment, student or path.stem)
@@ -110,6 +114,7 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
         probe = diagnosis.probe_args(func)
         jobs.append({"id": cid, "calls": [(func, a) for a in probe], "wall": wall_s, "cpu": cpu_s})
         plan[cid] = (fr, None, probe)
+    honesty: dict[str, set] = {}
     if jobs:
         statements = [(useful_import(src), line) if src.lstrip().startswith(("import ", "from ")) else (src, line)
                       for src, line in sub.statements]
@@ -122,8 +127,8 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
                                      for j in jobs})
             res.notes.append(f"the sandbox failed: {exc}")
         for k, err in run.load_errors:
-            line = statements[k][1] if k < len(statements) else "?"
-            res.notes.append(f"statement at line {line} skipped: {err}")
+            where = sub.where(statements[k][1]) if k < len(statements) else "?"
+            res.notes.append(f"statement at {where} skipped: {_cell_lines(sub, err)}")
         for cid, (fr, i, b) in plan.items():
             cr = run.checks.get(cid, CheckRun(failure="not run"))
             if i is None:
@@ -132,17 +137,45 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
                 except Exception:  # noqa: BLE001 - no diagnosis is better than no grade
                     fr.diagnosis = ""
                 continue
+            used = sorted({h for c in cr.calls for h in c.honesty})
+            if used:
+                honesty.setdefault(fr.name, set()).update(used)
             frac, msg = b.judge(b, cr)
+            msg = _cell_lines(sub, msg)
             frac = min(1.0, max(0.0, float(frac)))
             printed = next((c.stdout for c in cr.calls if c.stdout.strip()), "")
             if printed and frac < 1:
                 msg += f"\nprinted: {printed[:300]}" + (" ... (output truncated)" if len(printed) > 300 else "")
             fr.tests[i] = TestResult(b.name, fr.name, round(frac * b.weight, 4), b.weight, msg)
         for fr in res.functions:
+            if honesty.get(fr.name):  # caught at run time: a route the syntax check missed
+                names = ", ".join(sorted(honesty[fr.name]))
+                fr.status = "academic honesty"
+                why = (f"no credit: while it ran, {fr.name} called {names}, which does the exercise for you "
+                       "(caught inside the sandbox). Write the computation yourself.")
+                fr.tests = [TestResult(t.name, t.function, 0.0, t.max_score, why) for t in fr.tests]
+                continue
             if fr.status == "graded" and all(t.output.startswith("not implemented") for t in fr.tests):
                 fr.status = "not implemented"
     res.execution_time = time.perf_counter() - t0
     return res
+
+
+def not_handed_in(assignment: str, material: Material, student: str) -> GradeResult:
+    """Zero for every check of ``assignment``, each saying it was not handed in."""
+    res = GradeResult("", assignment, student)
+    for func, checks in material.checks(assignment).items():
+        fr = FunctionResult(func, status="not handed in")
+        fr.tests = [TestResult(b.name, func, 0.0, b.weight, f"{assignment} was not handed in") for b in checks]
+        res.functions.append(fr)
+    return res
+
+
+def _cell_lines(sub: Submission, text: str) -> str:
+    """``(line 48 in f)`` -> ``(code cell 3, line 5 in f)``: the line the student sees."""
+    if not sub.cells:
+        return text
+    return re.sub(r"\(line (\d+) in ", lambda m: f"({sub.where(int(m.group(1)))} in ", text)
 
 
 def _diagnose(fr: FunctionResult, probe: list, cr: CheckRun) -> None:
@@ -152,3 +185,5 @@ def _diagnose(fr: FunctionResult, probe: list, cr: CheckRun) -> None:
     mistake = diagnosis.diagnose(fr.name, probe, outputs)
     if mistake is not None:
         fr.diagnosis = mistake.line()
+        fr.mistake = (str(getattr(mistake, "key", fr.diagnosis)), str(getattr(mistake, "text", fr.diagnosis)),
+                      str(getattr(mistake, "equation", "")))

@@ -41,6 +41,14 @@ SKIPPED_IMPORTS = ("matplotlib", "ipywidgets", "IPython", "tqdm", "dtscal_lib")
 ALLOWED_KIT_IMPORTS = ("dtscal_lib.duckietown", "dtscal_lib.errors")
 
 
+#: parsing is bounded before it starts: Python's parser holds ~350 bytes per source byte
+#: (measured: 142 MB for a 400 kB one-expression list), so 256 kB of code costs < 100 MB;
+#: the longest solution notebook holds 7.2 kB of code (notebook 03), 35x less.
+MAX_CODE_CHARS = 256 * 1024
+#: a notebook file (outputs, images included): the largest solution notebook is 0.59 MB
+MAX_NOTEBOOK_BYTES = 32 * 2 ** 20
+
+
 @dataclass
 class Submission:
     """The parsed submission: ``statements`` to run, ``functions`` defined, honesty findings."""
@@ -52,6 +60,16 @@ class Submission:
     forbidden: dict[str, list[str]] = field(default_factory=dict)
     dropped: int = 0
     syntax_errors: list[str] = field(default_factory=list)
+    #: (code cell number, first line, last line) of each notebook code cell, in the numbering
+    #: of ``statements`` (the cells laid end to end); empty for a .py file
+    cells: list[tuple[int, int, int]] = field(default_factory=list)
+
+    def where(self, line: int) -> str:
+        """``line`` as the student sees it: ``code cell 3, line 5`` in a notebook."""
+        for number, first, last in self.cells:
+            if first <= line <= last:
+                return f"code cell {number}, line {line - first + 1}"
+        return f"line {line}"
 
 
 def _magic_free(src: str) -> str:
@@ -60,6 +78,11 @@ def _magic_free(src: str) -> str:
 
 def read_cells(path: Path) -> list[tuple[str, int]]:
     """Code of a submission as ``(source, first line)`` blocks (one per notebook code cell)."""
+    size = path.stat().st_size
+    limit = MAX_CODE_CHARS if path.suffix == ".py" else MAX_NOTEBOOK_BYTES
+    if size > limit:
+        raise DtscalError(f"{path.name} is {size / 2 ** 20:.1f} MB, more than the {limit / 2 ** 20:g} MB a "
+                          "submission may have; hand in the exercise code only")
     if path.suffix == ".py":
         return [(path.read_text(encoding="utf-8", errors="replace"), 1)]
     try:
@@ -93,11 +116,21 @@ def load_submission(path) -> Submission:
     path = Path(path)
     sub = Submission(path)
     aliases: dict[str, str] = {}  # local name -> dotted origin ("cv2", "cv2.findHomography", ...)
-    for src, first in read_cells(path):
+    blocks = read_cells(path)
+    code = sum(len(src) for src, _ in blocks)
+    if code > MAX_CODE_CHARS:
+        raise DtscalError(f"{path.name} holds {code} characters of code, more than the {MAX_CODE_CHARS} a "
+                          "submission may have (the longest solution has 7200); nothing was parsed")
+    if path.suffix != ".py":
+        sub.cells = [(k + 1, first, first + src.count("\n")) for k, (src, first) in enumerate(blocks)]
+    for src, first in blocks:
         try:
             tree = ast.parse(src)
         except SyntaxError as exc:
-            sub.syntax_errors.append(f"line {first + (exc.lineno or 1) - 1}: {exc.msg}")
+            sub.syntax_errors.append(f"{sub.where(first + (exc.lineno or 1) - 1)}: {exc.msg}")
+            continue
+        except (MemoryError, RecursionError, ValueError) as exc:
+            sub.syntax_errors.append(f"{sub.where(first)}: the code cannot be parsed ({type(exc).__name__})")
             continue
         for node in tree.body:
             if isinstance(node, (ast.Import, ast.ImportFrom)):
