@@ -1083,11 +1083,14 @@ def _finish(gray: np.ndarray, raw: np.ndarray, board: Board, border_margin: floa
         corners, ok = refine_corners_checked(gray, raw, board)
         if not ok:
             # a board running off the image is reported as such (ROS's rule), not as inconsistent
-            # ... and so is a board whose outer squares the image edge cuts (a corner within a square of
-            # it): the refinement of those corners is pulled by the edge, the grid check is its echo
-            reach = border_margin + _local_square(raw, board)
+            # ... and so is a board whose corners off the grid have squares the image edge cuts (within a
+            # square of it): the edge pulled their refinement, the grid check is its echo
+            reach = (border_margin + _local_square(raw, board))[:, None]
+            cut = np.any((raw < reach) | (raw > np.array([w - 1.0, h - 1.0]) - reach), axis=1)
+            off = ((grid_jump(corners, board) > grid_tolerance(raw, board))
+                   | (grid_residuals(corners, board, SMOOTH_GRID_TOLERANCE) > SMOOTH_GRID_TOLERANCE))
             if (_near_border(raw, (w, h), border_margin) or _near_border(corners, (w, h), border_margin)
-                    or np.any((raw < reach[:, None]) | (raw > np.array([w - 1.0, h - 1.0]) - reach[:, None]))):
+                    or np.any(cut & off)):
                 return Detection(False, raw, REASON_AT_BORDER, board, (w, h))
             return Detection(False, corners, REASON_INCONSISTENT, board, (w, h), grid_rejection(corners, board))
     if _near_border(corners, (w, h), border_margin):
