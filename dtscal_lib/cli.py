@@ -109,6 +109,7 @@ def cmd_calibrate_intrinsics(args) -> int:
         for n, v in zip(names, vals):
             print(f"  {n:5s} = {v:10.4f} +- {r.std.get(n, float('nan')):.4f}")
         print("  dist  = [" + ", ".join(f"{d:.6f}" for d in r.dist) + "]")
+        print("\n".join(quality.summary_lines(r.std_method)))  # sigma's method, what it means for a robot
         if run.tally.rejected:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:

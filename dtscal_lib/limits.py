@@ -82,7 +82,8 @@ TABLE: tuple[Limit, ...] = (
           "fleet sample: within 1.6 % (x) and 6.1 % (y)"),
     Limit("max_relative_focal_std", 0.02, "sigma(f) / f", "refusal (plausibility)",
           "a focal length known only to +-2 % moves ground points by centimetres at 60 cm",
-          "real photographs of data/real/ (13 views each): sigma(fx)/fx 0.07 % (0.12-0.17 % by a jackknife)"),
+          "real photographs of data/real/ (13 views each): sigma(fx)/fx 0.12-0.15 % (the kit's, within 1.5x "
+          "of a jackknife)"),
     Limit("focal_std_undetermined", 0.25, "sigma(f) / f", "calibration: cannot be computed (CalibrationError)",
           "a focal length known only to +-25 % is not determined (a limit of the data, not a belief)",
           "chosen: the value calibration.py used"),

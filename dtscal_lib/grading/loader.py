@@ -1,8 +1,9 @@
 """Read a submission: its import and ``def`` statements only, and what they call.
 
 A submission is a notebook (every code cell is read) or a Python file. The source is only
-*parsed* here, in the grader; nothing runs. Top-level code other than imports and function
-definitions (plots, widgets, long loops, ``sys.exit()``) is dropped, so it never runs; the
+*parsed* here, in the grader; nothing runs. Top-level code other than imports, function
+definitions and assignments of constants (``_IDX = np.array([0, 1, 2])``; plots, widgets,
+long loops, ``sys.exit()``, other calls) is dropped, so it never runs; the
 kept statements run later inside the sandbox (:mod:`dtscal_lib.grading.child`).
 
 The academic-honesty rule is checked here too, on the syntax tree: an exercise function
@@ -111,11 +112,51 @@ def _is_stub(fn: ast.FunctionDef) -> bool:
     return isinstance(exc, ast.Name) and exc.id == "NotImplementedError"
 
 
+#: calls allowed in a kept top-level constant (``_IDX = np.array([0, 0, 1])``, ``TOL = math.sqrt(2)``)
+CONSTANT_CALLS = frozenset({"array", "asarray", "arange", "eye", "diag", "zeros", "ones", "sqrt", "deg2rad",
+                            "radians", "float64", "float32", "int64", "tuple", "list", "dict", "float", "int"})
+
+
+def _known_names(aliases: dict) -> set[str]:
+    """Names a kept constant may use: imports that run in the sandbox (not the course plumbing)."""
+    return {a for a, origin in aliases.items() if useful_import(f"import {origin}") is not None}
+
+
+def _is_constant(node: ast.AST, known: set[str]) -> bool:
+    """A top-level assignment of a constant to plain names (kept: exercise functions may use it).
+
+    Only literals, names, attributes, arithmetic and a few cheap constructors with constant
+    arguments qualify; anything else at top level (plots, loops, other calls) is dropped."""
+    if isinstance(node, ast.Assign):
+        targets, value = node.targets, node.value
+    elif isinstance(node, ast.AnnAssign) and node.value is not None:
+        targets, value = [node.target], node.value
+    else:
+        return False
+    if not all(isinstance(t, ast.Name) or (isinstance(t, ast.Tuple) and all(isinstance(e, ast.Name) for e in t.elts))
+               for t in targets):
+        return False
+    ok = (ast.Constant, ast.Name, ast.Attribute, ast.Tuple, ast.List, ast.Dict, ast.Set, ast.UnaryOp, ast.BinOp,
+          ast.Call, ast.Load, ast.operator, ast.unaryop, ast.keyword)
+    for n in ast.walk(value):
+        if not isinstance(n, ok) or (isinstance(n, ast.Name) and n.id not in known):
+            return False
+        if isinstance(n, ast.Call):
+            f = n.func
+            name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+            if name not in CONSTANT_CALLS:
+                return False
+        if isinstance(n, ast.BinOp) and isinstance(n.op, ast.Pow):
+            return False  # 10 ** 10 ** 10 would never finish
+    return True
+
+
 def load_submission(path) -> Submission:
     """Parse ``path`` (.ipynb or .py) into a :class:`Submission`; runs nothing."""
     path = Path(path)
     sub = Submission(path)
     aliases: dict[str, str] = {}  # local name -> dotted origin ("cv2", "cv2.findHomography", ...)
+    constants: set[str] = set()  # names of kept top-level constants
     blocks = read_cells(path)
     code = sum(len(src) for src, _ in blocks)
     if code > MAX_CODE_CHARS:
@@ -141,6 +182,9 @@ def load_submission(path) -> Submission:
                     sub.stubs.add(node.name)
                 else:
                     sub.stubs.discard(node.name)
+            elif _is_constant(node, _known_names(aliases) | constants):
+                constants.update(n.id for n in ast.walk(node) if isinstance(n, ast.Name)
+                                 and isinstance(n.ctx, ast.Store))
             else:
                 sub.dropped += 1
                 continue
