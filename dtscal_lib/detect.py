@@ -969,16 +969,7 @@ def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) ->
 
     A corner has strong gradients in two directions (about 0.3-1); an edge, or a corner smeared
     by motion blur, in one direction only (near 0), where ``cornerSubPix`` is ill-conditioned.
-
-    Parameters
-    ----------
-    gray : (h, w) uint8
-    points : (M, 2) pixels
-    radius : (M,) int window half-sizes
-
-    Returns
-    -------
-    (M,) float64
+    Takes and returns arrays as :func:`corner_misfit` does: (M,) float64 for M points.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     out = np.zeros(len(pts))
