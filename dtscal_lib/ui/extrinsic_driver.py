@@ -24,6 +24,7 @@ from ..camera import CameraModel, rectify_image
 from ..errors import DtscalError, ImplausibleCalibrationError, Reason
 from ..session import ExtrinsicSession, robot_name
 from ..sources.live import open_live
+from .driver import LoopDriver
 from .frameloop import FrameLoop
 from .render import rectification_maps_fast
 
@@ -59,7 +60,7 @@ class Fitted:
     arrival: float
 
 
-class ExtrinsicDriver:
+class ExtrinsicDriver(LoopDriver):
     """The session, the intrinsics, the frames' bookkeeping and SAVE of the live extrinsic tool (no widgets)."""
 
     #: while there is no intrinsic calibration the tool idles: one camera frame per this many seconds
@@ -203,18 +204,8 @@ class ExtrinsicDriver:
 
     def reconnect_to(self) -> tuple[str, str]:
         """RECONNECT: re-open the source."""
-        try:
-            self.loop.reconnect()
-        except DtscalError as exc:
-            return f"RECONNECT failed: {exc}", "error"
-        return f"reconnecting to {self.spec}", "info"
+        return self._reconnect()
 
     def close(self) -> None:
         self._closed.set()
         self.loop.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()

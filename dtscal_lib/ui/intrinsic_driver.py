@@ -27,6 +27,7 @@ from ..sources.live import open_live
 from . import render
 from .archive import load_session, save_session
 from .background import BackgroundCalibration, PreviewMaps
+from .driver import LoopDriver
 from .frameloop import FrameLoop
 
 #: what the tool says of its frames when the source stops (every sample is kept)
@@ -46,7 +47,7 @@ class Taken:
     arrival: float
 
 
-class IntrinsicDriver:
+class IntrinsicDriver(LoopDriver):
     """The session, the work off the frame loop and the actions of the live calibrator (no widgets).
 
     The widget class overrides the hooks ``_calibrated``, ``_failed``, ``_verdict`` and ``_calibrate_ended``
@@ -237,19 +238,9 @@ class IntrinsicDriver:
 
     def reconnect_to(self) -> tuple[str, str]:
         """RECONNECT: re-open the source; samples and calibration are kept."""
-        try:
-            self.loop.reconnect()
-        except DtscalError as exc:
-            return f"RECONNECT failed: {exc}", "error"
-        return f"reconnecting to {self.spec}; {len(self.samples)} samples kept", "info"
+        return self._reconnect(f"; {len(self.samples)} samples kept")
 
     def close(self) -> None:
         """Stop the frame loop, close the source and end the calibration process."""
         self.loop.close()
         self.background.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
