@@ -1149,24 +1149,27 @@ _CENTRE_GAIN = _JUMP_WEIGHTS[(1, 1)][1]
 
 def _grid_jumps(corners: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray]:
     """``(jump vectors (N, 2), noise gain (N,))`` of :func:`grid_jump`; zeros for boards under 3x3."""
-    R, C = board.rows, board.cols
-    g = np.asarray(corners, dtype=np.float64).reshape(R, C, 2)
-    vec, gain = np.zeros((R, C, 2)), np.full((R, C), _CENTRE_GAIN)
+    W, gain = _grid_jump_matrix(board.rows, board.cols)
+    return W @ np.asarray(corners, dtype=np.float64).reshape(-1, 2), gain.copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _grid_jump_matrix(R: int, C: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(W (N, N), gain (N,))``: the jump vectors of :func:`_grid_jumps` are ``W @ corners`` (one product
+    instead of a Python loop over the outer ring: the same weights, summed in another order)."""
+    N = R * C
+    W, gain = np.zeros((N, N)), np.full(N, _CENTRE_GAIN)
     if R < 3 or C < 3:
-        return vec.reshape(-1, 2), gain.ravel()
-    # inner corners: the centre of their own 3x3 block, all at once
-    w = _JUMP_WEIGHTS[(1, 1)][0].reshape(3, 3)
-    for dr in range(3):
-        for dc in range(3):
-            vec[1:-1, 1:-1] += w[dr, dc] * g[dr:R - 2 + dr, dc:C - 2 + dc]
-    # the outer ring: from the 3x3 block reaching inward
+        return W, gain
     for j in range(R):
-        for i in (range(C) if j in (0, R - 1) else (0, C - 1)):
+        for i in range(C):
+            # an inner corner: the centre of its own 3x3 block; the outer ring: the block reaching inward
             j0, i0 = min(max(j - 1, 0), R - 3), min(max(i - 1, 0), C - 3)
             w, gn = _JUMP_WEIGHTS[(j - j0, i - i0)]
-            vec[j, i] = w @ g[j0:j0 + 3, i0:i0 + 3].reshape(9, 2)
-            gain[j, i] = gn
-    return vec.reshape(-1, 2), gain.ravel()
+            block = ((j0 + np.arange(3))[:, None] * C + (i0 + np.arange(3))[None, :]).ravel()
+            W[j * C + i, block] = w
+            gain[j * C + i] = gn
+    return W, gain
 
 
 def grid_jump(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
