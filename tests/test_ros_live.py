@@ -237,13 +237,12 @@ def test_commit_without_service_or_master_is_a_clear_error(roscore, tmp_path):
     calib = calib_files.IntrinsicCalibration.from_dict(dt.DEFAULT_INTRINSICS, "default")
     path = calib_files.save_intrinsics(calib, tmp_path / "cal", "nobot")
     before = hashlib.sha256(path.read_bytes()).hexdigest()
-    t = time.monotonic()
     with pytest.raises(CommitError) as e:
         commit_intrinsics("nobot", path, master_uri=roscore["ROS_MASTER_URI"], timeout=2)
     msg = str(e.value)
-    assert "no service /nobot/camera_node/set_camera_info" in msg and "camera node" in msg
+    # the 2 s wait for the service ran out (the reason, not the elapsed time, is what is checked)
+    assert "no service /nobot/camera_node/set_camera_info" in msg and "within 2 s" in msg and "camera node" in msg
     assert f"{path} is kept" in msg and "scp" in msg
-    assert time.monotonic() - t < 60
     with pytest.raises(CommitError, match="cannot reach the ROS master"):
         commit_intrinsics("nobot", path, master_uri=f"http://127.0.0.1:{_free_port()}", timeout=2)
     assert hashlib.sha256(path.read_bytes()).hexdigest() == before  # the local file is intact
@@ -269,23 +268,31 @@ def test_ros_missing_is_a_clear_error(monkeypatch, tmp_path):
 
 
 def test_helper_uses_newest_frame_only(roscore, tmp_path):
-    """A consumer far slower than the camera: every frame it gets is at most a frame or two old."""
+    """A consumer that takes one frame, then comes back after the whole recording has played, gets the
+    newest frame received, never the next one of a queue (counts, not a rate: a loaded machine may
+    receive fewer of the bag's frames, and the answer is still the newest of those it received)."""
     env = roscore
     bag = str(datasets.session_dir() / "intrinsics.bag")
     with open_live(f"ros:{ROBOT}", master_uri=env["ROS_MASTER_URI"]) as cam:
         _wait(lambda: _subscribers(env, TOPIC) > 0, 60, "the helper to subscribe")
-        with _started([_ros_tool("rosbag"), "play", "--quiet", bag], env, tmp_path / "play.log"):
-            got, lags = [], []
-            f = cam.latest(timeout=30)
-            assert f is not None
-            for _ in range(8):
-                time.sleep(0.4)  # 12 camera frames go by
-                f = cam.latest(after=f.index, timeout=5)
-                assert f is not None, cam.status
-                lags.append(cam.status.frames - 1 - f.index)
-                got.append(f.index)
-    assert min(np.diff(got)) >= 3, got  # frames were skipped, not queued
-    assert max(lags) <= 3, lags
+        play = subprocess.Popen([_ros_tool("rosbag"), "play", "--quiet", bag], env=env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        try:
+            first = cam.latest(timeout=30)
+            assert first is not None
+            assert play.wait(timeout=600) == 0  # a safety net: the bag plays in about 20 s
+        finally:
+            if play.poll() is None:
+                os.killpg(play.pid, signal.SIGKILL)
+                play.wait()
+        back = cam.latest(after=first.index, timeout=5)  # the consumer is back: the newest frame so far
+        newest = back
+        while (newer := cam.latest(after=newest.index, timeout=2)) is not None:  # frames still in the pipe
+            newest = newer
+        st = cam.status
+    assert st.bad == {} and st.frames > first.index + 10, st  # many frames arrived while the consumer was away
+    assert back is not None and back.index > first.index + 10, (first.index, back)  # skipped, not queued
+    assert newest.index == st.frames - 1, (newest.index, st)  # the last frame handed out is the last received
     assert Path(bag).exists()
 
 
