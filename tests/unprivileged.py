@@ -7,6 +7,11 @@ interpreter (which may live in a folder ``nobody`` cannot read, such as ``/root`
 reports back through a pipe. Without root it runs the function in a child as the current
 user. :func:`shared_tmp` makes a folder ``nobody`` can reach (pytest's ``tmp_path`` under
 root lies inside a 0700 folder).
+
+The checkout itself may lie in a folder ``nobody`` cannot enter (a clone in ``/root`` or in a
+``mktemp -d`` folder): so the child imports every module of ``dtscal_lib`` before it drops its
+rights (a lazy import would otherwise fail), and a test hands ``nobody`` copies of its input files
+in the shared folder (:func:`readable_copy`), never paths inside the checkout.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ def run_unprivileged(fn, *args, timeout: int = 60) -> tuple[bool, str]:
             os.close(read_end)
             signal.alarm(timeout)
             if os.geteuid() == 0:
+                _import_everything()
                 user = pwd.getpwnam("nobody")
                 os.setgroups([])
                 os.setgid(user.pw_gid)
@@ -51,6 +57,30 @@ def run_unprivileged(fn, *args, timeout: int = 60) -> tuple[bool, str]:
     os.close(read_end)
     _, status = os.waitpid(pid, 0)
     return os.waitstatus_to_exitcode(status) == 0, b"".join(chunks).decode("utf-8", "replace")
+
+
+def _import_everything() -> None:
+    """Import every module of dtscal_lib now, while the checkout can still be read."""
+    import importlib
+    import pkgutil
+
+    import dtscal_lib
+
+    for mod in pkgutil.walk_packages(dtscal_lib.__path__, "dtscal_lib."):
+        if mod.name.endswith("__main__"):
+            continue
+        try:
+            importlib.import_module(mod.name)
+        except Exception:  # noqa: BLE001 - an optional module (ROS, a browser) is not this test's concern
+            pass
+
+
+def readable_copy(path, folder: Path) -> Path:
+    """A copy of ``path`` in ``folder`` (from :func:`shared_tmp`) that ``nobody`` can read (mode 0644)."""
+    dst = Path(folder) / Path(path).name
+    shutil.copyfile(path, dst)
+    os.chmod(dst, 0o644)
+    return dst
 
 
 @contextmanager
