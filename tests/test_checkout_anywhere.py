@@ -43,7 +43,7 @@ def test_quick_suite_passes_from_a_copy_under_a_0700_folder():
         assert Path(where.stdout.strip()).is_relative_to(copy), where.stdout + where.stderr
         run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:xdist",
                               "-m", "not slow", *REPRESENTATIVE], cwd=copy, env=env, capture_output=True, text=True,
-                             timeout=540)  # a safety net (pytest-timeout gives this test 600 s): it takes under a minute
+                             timeout=540)  # a safety net (pytest-timeout: 600 s); it takes about a minute
         assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-2000:]
         assert " passed" in run.stdout, run.stdout[-2000:]
     finally:
