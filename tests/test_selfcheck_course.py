@@ -380,8 +380,41 @@ def test_ground_points_wrong_order_message():
     assert "wrong order" in rep.text()
 
 
+def p2g_float32(H, uv):
+    """Right formula, computed in float32 (an image's dtype carried over): off by ~5e-8 m."""
+    uv = np.asarray(uv, np.float32)
+    p = np.column_stack([uv, np.ones(len(uv), np.float32)]) @ np.asarray(H, np.float32).T
+    return (p[:, :2] / p[:, 2:3]).astype(float)
+
+
+def p2g_rounded_H(H, uv):
+    """Right formula with H rounded to 6 decimals (copied from a printout): off by ~0.3 mm."""
+    return ref_p2g(np.round(np.asarray(H, float), 6), uv)
+
+
+def _case_lines(rep) -> dict[str, bool]:
+    """case title -> passed, from the report's text (``ok   title`` / ``FAIL title: ...``)."""
+    out = {}
+    for line in rep.text().splitlines():
+        word, _, rest = line.strip().partition(" ")
+        if word in ("ok", "FAIL"):
+            out[rest.strip().split(":")[0]] = word == "ok"
+    return out
+
+
+@pytest.mark.parametrize("wrong", [p2g_float32, p2g_rounded_H])
+def test_pixel_to_ground_opencv_cases_are_needed(wrong):
+    """These wrong answers pass the default-homography sanity case (its 2-3 mm tolerance) and fail only
+    because each OpenCV comparison (1e-9 m) is there: removing those cases would let them through."""
+    cases = _case_lines(_quiet(nb05.check_pixel_to_ground, wrong))
+    sanity = [t for t in cases if t.startswith("Duckietown's default homography")]
+    opencv = [t for t in cases if t not in sanity]
+    assert len(sanity) == 1 and cases[sanity[0]], cases  # the sanity case alone would pass it
+    assert len(opencv) == 2 and not any(cases[t] for t in opencv), cases  # each OpenCV case catches it
+
+
 def test_pixel_to_ground_pass_fail_stub():
     assert status(nb05.check_pixel_to_ground, ref_p2g) == PASS
     assert status(nb05.check_pixel_to_ground, stub) == NOT_IMPLEMENTED
-    for wrong in (p2g_transposed, p2g_no_divide, p2g_divide_by_h33):
+    for wrong in (p2g_transposed, p2g_no_divide, p2g_divide_by_h33, p2g_float32, p2g_rounded_H):
         assert status(nb05.check_pixel_to_ground, wrong) == FAIL, wrong.__name__
