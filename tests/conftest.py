@@ -6,8 +6,9 @@ built once and a notebook's cells run in order in one kernel. No test measures t
 the machine to itself (the browser test once did, for its latency; that figure is now
 ``benchmarks/bench_browser.py``). A plain ``pytest`` runs everything in one process.
 
-Shared fixtures live here or in ``tests/helpers``-style modules (``ros_env.py``, ``nbtools.py``, ...),
-never in another test file: a test file is a specification and is not imported by others.
+Shared fixtures and helpers live here or in helper modules next to the tests (``ros_env.py``,
+``live_fakes.py``, ``nbtools.py``, ``unprivileged.py``, ...; their fixtures are registered below), never in
+another test file: a test file is a specification and no other file imports it.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import os
 from pathlib import Path
 
 import pytest
+from live_fakes import file_server  # noqa: F401 - fixture: a robot's file server on loopback
+from ros_env import ros_ok, roscore  # noqa: F401 - fixtures: ROS 1 present (fails under CI), a private roscore
 
 #: the longest files (measured with --durations, longest first), started first by the parallel part so that
 #: the two workers end together; every other file keeps its collection order after them

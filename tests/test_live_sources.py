@@ -21,26 +21,10 @@ from dtscal_lib import duckietown as dt
 from dtscal_lib.cli import main as cli_main
 from dtscal_lib.errors import CalibrationFileError, SourceError
 from dtscal_lib.robot import CommitError, commit_extrinsics, robot_files_url
-from dtscal_lib.sources import open_live, write_compressed_image_bag
+from dtscal_lib.sources import open_live
 from dtscal_lib.sources.live import CaptureLive, LiveFrames, LiveSource, is_live_spec
+from live_fakes import jpeg_frame, write_test_bag
 
-TOPIC = "/testbot/camera_node/image/compressed"
-
-
-def _jpeg(i: int) -> bytes:
-    img = np.full((120, 160, 3), (10 * i % 255, 90, 160), np.uint8)
-    cv2.putText(img, str(i), (40, 80), cv2.FONT_HERSHEY_SIMPLEX, 1.5, (255, 255, 255), 3)
-    return cv2.imencode(".jpg", img)[1].tobytes()
-
-
-def _bag(path, n: int, fps: float = 30.0, corrupt=()) -> str:
-    frames = []
-    for i in range(n):
-        data = _jpeg(i)
-        if i in corrupt:
-            data = data[: len(data) // 2]  # cut short, as a dropped transfer
-        frames.append((int(1_700_000_000e9 + i * 1e9 / fps), data))
-    return str(write_compressed_image_bag(path, TOPIC, frames))
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +68,7 @@ def test_recording_plays_at_its_recorded_rate(tmp_path, monkeypatch):
 
     clock = _FakeTime()
     monkeypatch.setattr(live, "time", clock)
-    bag = _bag(tmp_path / "r.bag", 60, fps=30)
+    bag = write_test_bag(tmp_path / "r.bag", 60, fps=30)
     cam = open_live(bag)  # not started: the test runs the player's loop itself, in this thread
     pushed = []
     real_push = cam._push
@@ -102,7 +86,7 @@ def test_recording_played_as_fast_as_it_decodes_never_waits(tmp_path, monkeypatc
 
     clock = _FakeTime()
     monkeypatch.setattr(live, "time", clock)
-    cam = open_live(_bag(tmp_path / "r.bag", 20, fps=30), realtime=False)
+    cam = open_live(write_test_bag(tmp_path / "r.bag", 20, fps=30), realtime=False)
     stop = _FakeStop(clock)
     cam._run(stop)
     assert stop.waits == [] and cam.status.frames == 20
@@ -160,7 +144,7 @@ def test_slow_consumer_gets_the_newest_frame_never_a_backlog():
 
 
 def test_recording_end_keeps_last_frame_and_reconnect_replays(tmp_path):
-    bag = _bag(tmp_path / "r.bag", 20)
+    bag = write_test_bag(tmp_path / "r.bag", 20)
     cam = open_live(bag, realtime=False).start()
     try:
         deadline = time.monotonic() + 10
@@ -187,7 +171,7 @@ def test_recording_end_keeps_last_frame_and_reconnect_replays(tmp_path):
 
 
 def test_loop_repeats_the_recording(tmp_path):
-    bag = _bag(tmp_path / "r.bag", 5, fps=100)
+    bag = write_test_bag(tmp_path / "r.bag", 5, fps=100)
     with open_live(bag, loop=True) as cam:
         deadline = time.monotonic() + 10
         while cam.status.frames < 12 and time.monotonic() < deadline:
@@ -196,7 +180,7 @@ def test_loop_repeats_the_recording(tmp_path):
 
 
 def test_corrupt_frames_are_counted_never_handed_out(tmp_path):
-    bag = _bag(tmp_path / "r.bag", 30, corrupt={3, 4, 17})
+    bag = write_test_bag(tmp_path / "r.bag", 30, corrupt={3, 4, 17})
     seen = []
     with open_live(bag, realtime=False) as cam:
         after = -1
@@ -279,7 +263,7 @@ def test_unopenable_camera_is_an_error_status(monkeypatch):
 
 
 def test_live_frames_stop_when_done(tmp_path):
-    bag = _bag(tmp_path / "r.bag", 200, fps=200)
+    bag = write_test_bag(tmp_path / "r.bag", 200, fps=200)
     seen = []
     frames = LiveFrames(bag, done=lambda: len(seen) >= 5)
     for f in frames:
@@ -355,33 +339,6 @@ def test_cli_extrinsics_writes_version_2(tmp_path, session, capsys):
 
 
 # ---------------------------------------------------------------------- extrinsic upload
-class _FileServer(http.server.BaseHTTPRequestHandler):
-    stored: dict = {}  # noqa: RUF012 (one server per test; reset by the fixture)
-
-    def do_POST(self):
-        body = self.rfile.read(int(self.headers["Content-Length"]))
-        type(self).stored[self.path] = body
-        self.send_response(200)
-        self.end_headers()
-        self.wfile.write(b"ok")
-
-    def log_message(self, *args):
-        pass
-
-
-@pytest.fixture
-def file_server():
-    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _FileServer)
-    _FileServer.stored = {}
-    t = threading.Thread(target=srv.serve_forever, daemon=True)
-    t.start()
-    try:
-        yield f"http://127.0.0.1:{srv.server_address[1]}", _FileServer.stored
-    finally:
-        srv.shutdown()
-        srv.server_close()
-
-
 def test_commit_extrinsics_uploads_the_file(tmp_path, file_server):
     base, stored = file_server
     path = calib_files.save_extrinsics(np.asarray(dt.DEFAULT_HOMOGRAPHY).reshape(3, 3), tmp_path, "bot1")
@@ -423,7 +380,7 @@ class _Mjpeg(http.server.BaseHTTPRequestHandler):
         self.end_headers()
         try:
             for i in range(self.frames):
-                b = _jpeg(i)
+                b = jpeg_frame(i)
                 self.wfile.write(b"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n\r\n" % len(b))
                 self.wfile.write(b + b"\r\n")
                 time.sleep(1 / 30)
@@ -494,7 +451,7 @@ def test_memory_stays_flat_over_18000_frames(tmp_path):
     Keeping the 18,000 frames (57.6 kB each here) would take about 1 GB; the resident size may
     grow by 30 MB at most (allocator noise).
     """
-    bag = _bag(tmp_path / "r.bag", 50)
+    bag = write_test_bag(tmp_path / "r.bag", 50)
     with open_live(bag, realtime=False, loop=True) as cam:
         after, early = -1, None
         while cam.status.frames < 18_000:
