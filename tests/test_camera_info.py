@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from dtscal_lib import calib_files
-from dtscal_lib.robot import camera_info_dict, commit_intrinsics
+from dtscal_lib.robot import CommitError, camera_info_dict, commit_intrinsics
 from dtscal_lib.sources import live
 
 K = np.array([[310.5, 0.0, 322.25], [0.0, 305.75, 238.5], [0.0, 0.0, 1.0]])  # fx != fy, cx != cy
@@ -116,3 +116,16 @@ def test_the_message_the_helper_builds(calib_file, monkeypatch, capsys):
     assert info.header.frame_id == "bot1/camera_optical_frame"
     _check_fields({"width": info.width, "height": info.height, "distortion_model": info.distortion_model,
                    "K": list(info.K), "D": list(info.D), "R": list(info.R), "P": list(info.P)})
+
+
+@pytest.mark.parametrize("kind, advice", [("no_service", "is the camera node of bot1 running"),
+                                          ("refused", "the camera node refused"), ("no_master", "ROS_MASTER_URI")])
+def test_a_refusal_is_an_error_with_advice_and_the_file_kept(calib_file, monkeypatch, kind, advice):
+    before = calib_file.read_bytes()
+    answer = json.dumps({"ok": False, "kind": kind, "message": f"the node said {kind}"}).encode()
+    monkeypatch.setattr(live, "run_ros_helper",
+                        lambda args, **k: subprocess.CompletedProcess(args, 0, answer + b"\n", b""))
+    with pytest.raises(CommitError) as e:
+        commit_intrinsics("bot1", calib_file, master_uri="http://127.0.0.1:9", timeout=2)
+    assert f"the node said {kind}" in str(e.value) and advice in str(e.value) and "scp" in str(e.value)
+    assert calib_file.read_bytes() == before
