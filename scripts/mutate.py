@@ -8,8 +8,9 @@ The bugs are kept in ``tests/mutations/*.toml`` as sed-style patches::
     file = "dtscal_lib/robot.py"
     pattern = '"K": [float(v) for v in calib.K.ravel()]'    # literal text, found exactly once
     replacement = '"K": [float(v) for v in calib.K.T.ravel()]'
-    tests = ["tests/test_camera_info.py"]                     # what must catch it (files or node ids)
+    tests = ["tests/test_camera_info.py"]                     # what must catch it (files, node ids, options)
     why = "COMMIT sends K transposed: the robot's camera_info is wrong"
+    also = [{file = "...", pattern = "...", replacement = "..."}]   # optional: more places of the same bug
 
 For each mutation: check the pattern occurs exactly once, write the mutated file, run
 ``pytest -x -q`` on the named tests only (no xdist, no bytecode written), restore the file (byte
@@ -71,19 +72,27 @@ def run_tests(tests: list[str]) -> tuple[int, str]:
 
 
 def mutate_and_run(m: dict) -> tuple[str, str]:
-    path = ROOT / m["file"]
-    original = path.read_bytes()
-    st = os.stat(path)
-    text = original.decode("utf-8")
-    n = text.count(m["pattern"])
-    if n != 1:
-        return "STALE", f"the pattern occurs {n} times in {m['file']} (must be exactly once)"
+    patches = [m] + list(m.get("also", []))  # one bug may need two places (a limit and its backstop)
+    saved = {}
+    for p in patches:
+        path = ROOT / p["file"]
+        if path not in saved:
+            saved[path] = (path.read_bytes(), os.stat(path))
+    texts = {path: raw.decode("utf-8") for path, (raw, _) in saved.items()}
+    for p in patches:
+        path = ROOT / p["file"]
+        n = texts[path].count(p["pattern"])
+        if n != 1:
+            return "STALE", f"the pattern occurs {n} times in {p['file']} (must be exactly once)"
+        texts[path] = texts[path].replace(p["pattern"], p["replacement"])
     try:
-        path.write_text(text.replace(m["pattern"], m["replacement"]), encoding="utf-8")
+        for path, text in texts.items():
+            path.write_text(text, encoding="utf-8")
         code, detail = run_tests(m["tests"])
     finally:
-        path.write_bytes(original)
-        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+        for path, (raw, st) in saved.items():
+            path.write_bytes(raw)
+            os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
     if code == 0:
         return "MISSED", "every named test passed"
     if code == 5:
@@ -97,7 +106,8 @@ def table(rows: list[tuple[dict, str, str]]) -> str:
     lines = ["| # | planted bug | file | caught by | result |", "|---|---|---|---|---|"]
     for i, (m, status, detail) in enumerate(rows, 1):
         by = detail if status.startswith("caught") else "; ".join(m["tests"])
-        lines.append(f"| {i} | {m['name']} | `{m['file']}` | `{by}` | {status} |")
+        files = ", ".join(dict.fromkeys(f"`{p['file']}`" for p in [m, *m.get("also", [])]))
+        lines.append(f"| {i} | {m['name']} | {files} | `{by}` | {status} |")
     return "\n".join(lines)
 
 
@@ -113,7 +123,8 @@ def main(argv=None) -> int:
         for m in ms:
             print(f"{m['name']:55} {m['file']:38} {' '.join(m['tests'])}")
         return 0
-    dirty = subprocess.run(["git", "status", "--porcelain", "--", *sorted({m["file"] for m in ms})], cwd=ROOT,
+    files = sorted({p["file"] for m in ms for p in [m, *m.get("also", [])]})
+    dirty = subprocess.run(["git", "status", "--porcelain", "--", *files], cwd=ROOT,
                            capture_output=True, text=True).stdout.strip()
     if dirty:
         print(f"uncommitted changes in the files to mutate (commit them first):\n{dirty}", file=sys.stderr)
