@@ -46,6 +46,7 @@ import shutil
 import stat
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,7 +57,7 @@ import yaml
 from . import duckietown as dt
 from . import safe_yaml
 from .camera import CameraModel, as_dist
-from .errors import CalibrationFileError, DtscalError
+from .errors import CalibrationFileError, CalibrationFileWarning, DtscalError
 
 #: distortion models a file may declare, with their number of coefficients
 SUPPORTED_MODELS = {"plumb_bob": 5}
@@ -186,6 +187,28 @@ def _matrix(doc: dict, key: str, rows: int, cols: int | None, where: str) -> np.
         raise _fail(where, f"{key}.data has {len(data)} values; expected rows*cols = {r * c}")
     vals = [_number(v, where, f"{key}.data[{i}]") for i, v in enumerate(data)]
     return np.array(vals, dtype=np.float64).reshape(r, c)
+
+
+def _warn(where: str, msg: str) -> None:
+    warnings.warn(CalibrationFileWarning(f"{where}: {msg}"), stacklevel=3)
+
+
+def _read_P(P: np.ndarray, where: str) -> np.ndarray:
+    """``P`` as Duckietown's loader uses it: a third row ``[0, 0, 1, t]`` with ``t != 0`` is read as
+    ``[0, 0, 1, 0]``, with a :class:`~dtscal_lib.errors.CalibrationFileWarning`.
+
+    Duckietown's camera node and rectifier pass only P's left 3x3 (the rectified camera matrix)
+    to OpenCV, so the fourth entry of the third row is never used; real files carry ``1`` there
+    (Duckietown's DD24 extrinsic calibration YAML has ``[0, 0, 1, 1]``). A third row whose first
+    three entries are not ``[0, 0, 1]`` changes the rectified camera itself and stays an error.
+    """
+    if P.shape == (3, 4) and np.all(np.isfinite(P)) and np.array_equal(P[2, :3], [0.0, 0.0, 1.0]) and P[2, 3] != 0:
+        _warn(where, f"projection_matrix third row is {P[2].tolist()}, not [0, 0, 1, 0]; read as [0, 0, 1, 0] "
+                     "as Duckietown's loader does (only P's left 3x3, the rectified camera matrix, is used). "
+                     "Recalibrate or fix the file to silence this warning")
+        P = P.copy()
+        P[2, 3] = 0.0
+    return P
 
 
 def _check_intrinsic_values(width, height, K, model, D, R, P, where: str) -> None:
@@ -376,7 +399,7 @@ class IntrinsicCalibration:
         K = _matrix(doc, "camera_matrix", 3, 3, where)
         D = _matrix(doc, "distortion_coefficients", 1, SUPPORTED_MODELS[model], where).ravel()
         R = _matrix(doc, "rectification_matrix", 3, 3, where)
-        P = _matrix(doc, "projection_matrix", 3, 4, where)
+        P = _read_P(_matrix(doc, "projection_matrix", 3, 4, where), where)
         _check_intrinsic_values(width, height, K, model, D, R, P, where)
         return cls(name, width, height, K, model, D, R, P)
 
@@ -434,11 +457,17 @@ def load_intrinsics(path) -> IntrinsicCalibration:
     return IntrinsicCalibration.from_dict(doc, where)
 
 
-def validate_homography(H, where: str = "homography") -> np.ndarray:
+def validate_homography(H, where: str = "homography", *, writing: bool = False) -> np.ndarray:
     """Check a ground homography (rectified pixel -> ground metres); returns (3, 3) float64.
 
-    Refuses non-finite, singular and corrupt (``H[1][2] > 0``, Duckietown's rule)
-    homographies with a :class:`CalibrationFileError` naming ``where``.
+    Refuses non-finite and singular homographies with a :class:`CalibrationFileError` naming
+    ``where``. ``H[1][2] > 0`` is Duckietown's rule when *writing* a file (``writing=True``:
+    refused); its reader accepts such files, and so does the kit, with a
+    :class:`~dtscal_lib.errors.CalibrationFileWarning`: among the calibration files of about 125 real
+    Duckiebots in Duckietown's public fleet repository (duckiefleet, 2017-18), 8 well-formed extrinsic
+    files have it (issue 17's survey), robots whose image is
+    rotated 180 degrees (the camera mounted upside-down), whose own ``P`` gives a camera 0.10-0.11 m
+    high pitched 16-24 degrees down: self-consistent, a property of the mounting.
     """
     H = np.asarray(H, dtype=np.float64)
     if H.size != 9:
@@ -450,7 +479,11 @@ def validate_homography(H, where: str = "homography") -> np.ndarray:
     if sv[0] == 0 or sv[-1] / sv[0] < 1e-14:
         raise _fail(where, "homography is singular (it maps the image onto a line or a point); "
                            "recalibrate the extrinsics")
-    if dt.homography_is_corrupt(H):
+    if dt.homography_is_corrupt(H) and not writing:
+        _warn(where, f"homography has H[1][2] = {H[1, 2]:g} > 0: the camera's image is rotated 180 degrees "
+                     "(mounted upside-down), or the corners were mirrored or mis-ordered. Duckietown reads such "
+                     "files but its calibration refuses to write them; check the robot's ground projection")
+    elif dt.homography_is_corrupt(H):
         raise _fail(where, f"homography has H[1][2] = {H[1, 2]:g} > 0, which Duckietown rejects as corrupt: "
                            "with H[2][2] = 1, (H[0][2], H[1][2]) is where the image's top-left pixel lands "
                            "on the ground; that pixel is above the horizon and lands behind the robot on its "
@@ -624,7 +657,7 @@ def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """
     check_robot_name(robot)
     path = _target(extrinsic_path(out_dir, robot), rejected)
-    H = validate_homography(H, f"{path} (not written)")
+    H = validate_homography(H, f"{path} (not written)", writing=True)
     return _write(path, {"homography": [_plain(v) for v in H.ravel()]})
 
 
@@ -677,7 +710,7 @@ def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
     (``camera_specific``: ``Hv2i @ F``). ``Kp`` is the rectified camera (``P[:, :3]``).
     """
     Kp, Hv2i = _v2_frame(calib)
-    Hv = validate_homography(H, "classic homography") @ Kp
+    Hv = validate_homography(H, "classic homography", writing=True) @ Kp
     return np.linalg.inv(Hv2i) @ (Hv / Hv[2, 2])
 
 
@@ -717,14 +750,15 @@ def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | N
     return extrinsic_from_v2(F, calib, where), "2", None if date is None else str(date)
 
 
-def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None) -> Path:
+def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None,
+                       rejected: bool = False) -> Path:
     """Write ``camera_extrinsic/<robot>.yaml`` in the classic format (default) or as version ``"2"``.
 
     ``H`` is the classic homography; ``fmt="2"`` needs ``intrinsics`` (object or path) and stamps
-    ``date`` (default now, ISO 8601).
+    ``date`` (default now, ISO 8601). ``rejected`` writes ``<robot>.rejected.yaml`` beside, in either format.
     """
     if fmt == "classic":
-        return save_extrinsics(H, out_dir, robot)
+        return save_extrinsics(H, out_dir, robot, rejected=rejected)
     if fmt != "2":
         raise CalibrationFileError(f"extrinsic format {fmt!r} is unknown; use 'classic' or '2'")
     if intrinsics is None:
@@ -733,7 +767,7 @@ def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsi
 
     calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
     check_robot_name(robot)
-    path = extrinsic_path(out_dir, robot)
+    path = _target(extrinsic_path(out_dir, robot), rejected)
     F = extrinsic_to_v2(H, calib)
     stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
     text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})

@@ -31,11 +31,13 @@ Pipeline, for ``V`` views of a planar target (any planar point set, any unit):
    refinement goes on from there when that fits it better. Given ``initial`` (an earlier
    solution, e.g. of the same views before outliers were dropped), the refinement starts
    there instead of steps 4-5's search.
-6. **Uncertainty**, the Hartley-Zisserman way: ``sigma^2 = |e|^2 / (2N - p)`` with
-   ``e`` all residuals, ``N`` all points and ``p`` all estimated parameters;
-   covariance ``sigma^2 (J^T J)^-1``; the reported standard deviations are the square
-   roots of its intrinsic diagonal (the same formula as OpenCV's
-   ``stdDeviationsIntrinsics``).
+6. **Uncertainty** (:mod:`dtscal_lib.covariance`): the noise model, the Hartley-Zisserman way,
+   ``sigma^2 = |e|^2 / (2N - p)`` with ``e`` all residuals, ``N`` all points and ``p`` all
+   estimated parameters, covariance ``sigma^2 (J^T J)^-1`` (OpenCV's ``stdDeviationsIntrinsics``:
+   ``std_noise_model``); and a sandwich over the views (close to a leave-one-view-out jackknife).
+   The reported standard deviations ``std`` come from the larger of the two in every direction: on
+   real photographs, whose residuals are not independent noise, the noise model alone is 2-4x too
+   small. Both through the Schur complement, linear in the views.
 
 The projection of every point of every view and its Jacobian (skew and distortion terms
 included) are computed at once in numpy (``_Problem``), one vectorized Rodrigues for all poses;
@@ -64,8 +66,11 @@ import cv2
 import numpy as np
 
 from .camera import CameraModel, as_K, as_points, project_points
+from .covariance import NormalBlocks, honest_intrinsic_covariance
+from .covariance import rodrigues as _rodrigues
 from .errors import CalibrationError, DtscalError
 from .homography import estimate_homography
+from .quality import assess
 from .validation import check_image_size
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
@@ -78,14 +83,19 @@ MIN_POINTS_PER_VIEW = 4
 MIN_VIEWS = 3
 #: relative singular value below which the stacked Zhang constraints count as rank deficient
 _PARALLEL_VIEWS_TOL = 2e-3
-#: boards whose recovered normals all lie within this angle (degrees) of their mean are "parallel"
-MIN_TILT_SPREAD_DEG = 3.0
-#: a focal length whose standard deviation exceeds this fraction of it is not determined
-MAX_RELATIVE_FOCAL_STD = 0.25
+#: boards whose recovered normals all lie within this angle (degrees) of their mean are "parallel";
+#: a focal length whose standard deviation exceeds this fraction of it is not determined (limits of the
+#: mathematics, named apart from the beliefs in the one table: dtscal_lib.limits)
+from .limits import FOCAL_STD_UNDETERMINED as MAX_RELATIVE_FOCAL_STD  # noqa: E402
+from .limits import MIN_TILT_SPREAD_DEG  # noqa: E402
 #: the extent of a view's object points, in their unit: a board, not an atom or a planet
 OBJECT_EXTENT_RANGE = (1e-6, 1e6)
 #: image points may lie this fraction of the image size outside it (a detector never does)
 IMAGE_SLACK = 0.25
+#: most corners (over all views) one calibration takes: calibration needs about 1.1 kB per corner and its
+#: verdict about 0.6 kB (benchmarks/bench_memory.py: 4000 views x 35 corners, +148 MB and +82-89 MB), so
+#: this keeps either near 1 GB; more views than that add nothing a subset would not give
+MAX_POINTS = 1_000_000
 
 
 # =========================================================================== result
@@ -103,7 +113,12 @@ class CalibrationResult:
     rvecs, tvecs : (V, 3) float64, board -> camera (Rodrigues vector, translation in
         the object points' unit)
     std : standard deviation of every estimated intrinsic parameter, keyed
-        ``fx, fy, cx, cy, [skew], k1, k2, [p1, p2, [k3]]``
+        ``fx, fy, cx, cy, [skew], k1, k2, [p1, p2, [k3]]``: how far it would move, 1 sigma, if the
+        calibration were repeated with new views of the same kind. The larger of the corner-noise
+        model's and a sandwich over the views, close to a jackknife (:mod:`dtscal_lib.covariance`;
+        ``std_method`` says which applied): residuals that are not independent noise make it larger
+    std_noise_model : the same from the noise model alone, ``sigma^2 (J^T J)^-1`` (OpenCV's
+        ``stdDeviationsIntrinsics``)
     model : ``"plumb_bob"`` or ``"radial2"``
     skew : whether the skew ``s = K[0, 1]`` was estimated
     image_size : (width, height)
@@ -130,12 +145,51 @@ class CalibrationResult:
     #: :meth:`quality` (residuals, verdict, projection uncertainty)
     object_points: list = field(default_factory=list, repr=False)
     image_points: list = field(default_factory=list, repr=False)
+    #: standard deviations from the corner-noise model alone (see ``std``)
+    std_noise_model: dict = field(default_factory=dict)
+    #: how ``std`` (and the projection uncertainty) were computed, in words
+    std_method: str = ""
+    #: (n, n) covariance of the intrinsics in the order of ``std`` (the one ``std`` is the diagonal of)
+    covariance: np.ndarray | None = field(default=None, repr=False)
 
     def quality(self, **kw):
         """Verdict, systematic-residual checks and projection uncertainty: :func:`dtscal_lib.quality.assess`."""
-        from .quality import assess
-
         return assess(self, **kw)
+
+    # ------------------------------------------------------------------ what the judge needs
+    @property
+    def dist_indices(self) -> list[int]:
+        """Indices into ``[k1, k2, p1, p2, k3]`` of the estimated distortion terms."""
+        return _dist_indices(self.model, fix_k3="k3" not in self.std)
+
+    def intrinsic_vector(self) -> np.ndarray:
+        """The estimated intrinsics ``[fx, fy, cx, cy, (skew), dist...]`` in the order of ``std``."""
+        K, di = self.K, self.dist_indices
+        return np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], [K[0, 1]] if self.skew else [],
+                               np.asarray(self.dist)[di]])
+
+    def normal_blocks(self) -> NormalBlocks:
+        """The normal equations at the solution, block by block (:class:`~dtscal_lib.covariance.NormalBlocks`)."""
+        _need_views(self)
+        problem = _Problem([np.asarray(o, dtype=np.float64)[:, :2] for o in self.object_points],
+                           [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in self.image_points],
+                           self.skew, self.dist_indices)
+        return problem.blocks(self.intrinsic_vector(), np.column_stack([self.rvecs, self.tvecs]))
+
+    def intrinsic_covariance(self) -> np.ndarray:
+        """(n, n) covariance of the intrinsics (``covariance``, recomputed if the result was built without it)."""
+        if self.covariance is None:
+            self.covariance = honest_intrinsic_covariance(self.normal_blocks())[0]
+        return self.covariance
+
+    def refit(self, object_points, image_points) -> "CalibrationResult":
+        """:func:`calibrate` other views with this result's model, skew and k3 choice."""
+        return calibrate(object_points, image_points, self.image_size, model=self.model, skew=self.skew,
+                         fix_k3="k3" not in self.std)
+
+    def board_normal_spread(self) -> float:
+        """Largest angle (degrees) between a board normal and the mean normal: :func:`board_normal_spread`."""
+        return board_normal_spread(self.rvecs)
 
     def camera(self) -> CameraModel:
         """The calibrated camera, with ``P`` from ``alpha = 0`` as ROS's calibrator sets it."""
@@ -153,6 +207,8 @@ class CalibrationResult:
             "sigma": float(self.sigma),
             "per_view_rms": [float(v) for v in self.per_view_rms],
             "std": {k: float(v) for k, v in self.std.items()},
+            "std_noise_model": {k: float(v) for k, v in self.std_noise_model.items()},
+            "std_method": self.std_method,
             "rvecs": [[float(v) for v in r] for r in self.rvecs],
             "tvecs": [[float(v) for v in t] for t in self.tvecs],
             "n_views": int(self.n_views),
@@ -251,6 +307,12 @@ def _check_views(object_points, image_points, image_size):
         img_out.append(p)
         obj_out.append(o)
     return obj_out, img_out, (w, h)
+
+
+def _need_views(result) -> None:
+    if not result.object_points or len(result.object_points) != result.n_views:
+        raise CalibrationError("this calibration result does not carry its views (object_points, image_points); "
+                               "recompute it with dtscal_lib.calibration.calibrate to judge its quality")
 
 
 def _view_array(a, dims: tuple[int, ...], name: str) -> np.ndarray:
@@ -555,45 +617,20 @@ class _Problem:
         gv = np.add.reduceat(np.einsum("pai,pa->pi", Je, r), self.starts, axis=0)
         return A, Bs, Cs, gi, gv
 
-
-def _skew_matrices(v: np.ndarray) -> np.ndarray:
-    """``[v]_x`` for each row of ``v`` (M, 3): (M, 3, 3)."""
-    S = np.zeros((len(v), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return S
-
-
-def _rodrigues(rvecs: np.ndarray, jacobian: bool = True):
-    """Rotation matrices of Rodrigues vectors (V, 3) -> (V, 3, 3), and ``dR[v, k] = dR / d r_k`` (V, 3, 3, 3).
-
-    Vectorized ``cv2.Rodrigues`` (the same matrices and derivatives, checked in the tests); the
-    derivative is Gallego and Yezzi's ``dR/dr_k = (r_k [r]_x + [r x (I - R) e_k]_x) R / |r|^2``, and
-    its first-order limit ``[e_k]_x`` near the identity.
-    """
-    r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
-    th = np.linalg.norm(r, axis=1)
-    small = th < 1e-9
-    ths = np.where(small, 1.0, th)
-    k = r / ths[:, None]
-    c, s = np.cos(th), np.sin(th)
-    Kx = _skew_matrices(k)
-    R = (c[:, None, None] * np.eye(3) + (1.0 - c)[:, None, None] * k[:, :, None] * k[:, None, :]
-         + s[:, None, None] * Kx)
-    if small.any():
-        R[small] = np.eye(3) + _skew_matrices(r[small])
-    if not jacobian:
-        return R, None
-    E = np.eye(3)
-    rx = _skew_matrices(r)
-    ImR = np.eye(3) - R  # (V, 3, 3); column k is (I - R) e_k
-    dR = np.empty((len(r), 3, 3, 3))
-    for j in range(3):
-        w = np.cross(r, ImR[:, :, j])
-        dR[:, j] = (r[:, j, None, None] * rx + _skew_matrices(w)) @ R / (ths ** 2)[:, None, None]
-    if small.any():
-        dR[small] = _skew_matrices(E)[None]
-    return R, dR
+    def blocks(self, theta, poses) -> NormalBlocks:
+        """The normal equations at ``(theta, poses)`` block by block, with each view's share (``O(V)`` memory)."""
+        r, Ji, Je = self.linearize_stacked(theta, poses)
+        A, Bs, Cs, _, _ = self.normal_blocks(r, Ji, Je)
+        n = self.n_intr
+        if np.all(self.counts == self.counts[0]):  # every view sees the whole board: batched products
+            Jiv = Ji.reshape(len(self.counts), -1, n)
+            JivT = Jiv.transpose(0, 2, 1)
+            A_views, g = JivT @ Jiv, (JivT @ r.reshape(len(self.counts), -1, 1))[:, :, 0]
+        else:
+            A_views = np.add.reduceat(np.einsum("pai,paj->pij", Ji, Ji), self.starts, axis=0)
+            g = np.add.reduceat(np.einsum("pai,pa->pi", Ji, r), self.starts, axis=0)
+        dof = r.size - (self.n_intr + 6 * len(self.counts))  # > 0: checked on entry to calibrate()
+        return NormalBlocks(A, Bs, Cs, A_views, g, _cost(r) / dof, _param_names(self.skew, self.dist_idx))
 
 
 def _normal_blocks(rs, Jis, Jes):
@@ -671,15 +708,13 @@ def _refine(problem: _Problem, theta, poses, max_iter: int = 200):
 
 
 def _intrinsic_covariance(problem: _Problem, theta, poses):
-    """``sigma^2`` and ``sigma^2 (J^T J)^-1`` restricted to the intrinsics (Schur complement)."""
-    r, Ji, Je = problem.linearize_stacked(theta, poses)
-    A, Bs, Cs, _, _ = problem.normal_blocks(r, Ji, Je)
-    n_res = r.size
-    n_par = problem.n_intr + 6 * len(problem.counts)
-    dof = n_res - n_par  # > 0: checked on entry to calibrate()
-    sigma2 = _cost(r) / dof
-    S = A - np.einsum("vij,vjk,vlk->il", Bs, np.linalg.inv(Cs), Bs)
-    return sigma2, sigma2 * np.linalg.inv(S)
+    """``sigma^2``, the intrinsics' honest covariance, the noise model's ``sigma^2 S^-1`` and the method in words.
+
+    See :mod:`dtscal_lib.covariance`: the larger of the noise model and a CR2 sandwich over the views.
+    """
+    blocks = problem.blocks(theta, poses)
+    cov, noise, method = honest_intrinsic_covariance(blocks)
+    return blocks.sigma2, cov, noise, method
 
 
 # =========================================================================== entry point
@@ -718,6 +753,21 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
     if model == "radial2" and not fix_k3:
         raise CalibrationError("model 'radial2' estimates k1 and k2 only; use model='plumb_bob' to estimate k3")
     obj, img, size = _check_views(object_points, image_points, image_size)
+    n_points = sum(len(p) for p in img)
+    if n_points > MAX_POINTS:
+        raise CalibrationError(
+            f"{len(img)} views with {n_points} corners are more than one calibration takes ({MAX_POINTS}: about "
+            f"{MAX_POINTS * 1.1e-6:.1f} GB of memory); calibrate a subset, e.g. one view in "
+            f"{-(-n_points // MAX_POINTS)}")
+    try:
+        return _calibrate(obj, img, size, model, skew, fix_k3, initial)
+    except MemoryError:
+        raise CalibrationError(
+            f"not enough memory to calibrate {len(img)} views ({n_points} corners, about {n_points * 1.1e-6:.2f} GB "
+            "needed); calibrate fewer views or free memory") from None
+
+
+def _calibrate(obj, img, size, model: str, skew: bool, fix_k3: bool, initial) -> CalibrationResult:
     dist_idx = _dist_indices(model, fix_k3)
     n_res = 2 * sum(len(p) for p in img)
     n_par = 4 + int(skew) + len(dist_idx) + 6 * len(img)
@@ -747,7 +797,7 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
     _check_tilt_spread(poses[:, :3])
     try:
         res = problem.residuals_stacked(theta, poses)
-        sigma2, cov = _intrinsic_covariance(problem, theta, poses)
+        sigma2, cov, cov_noise, method = _intrinsic_covariance(problem, theta, poses)
     except (np.linalg.LinAlgError, DtscalError) as exc:
         raise CalibrationError(
             f"the calibration did not converge to a usable camera ({exc}); add views with the board "
@@ -755,11 +805,14 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
         ) from None
     sq = np.add.reduceat((res ** 2).sum(axis=1), problem.starts)
     npts = problem.counts
-    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) < 0):
+    if not (np.all(np.isfinite(cov)) and np.all(np.isfinite(cov_noise))) or np.any(np.diag(cov_noise) < 0):
         raise CalibrationError("the parameter covariance is singular: the views do not determine the camera; add views")
     names = _param_names(skew, dist_idx)
     std = {n: float(np.sqrt(v)) for n, v in zip(names, np.diag(cov))}
-    worst = max(std["fx"] / K[0, 0], std["fy"] / K[1, 1])
+    std_noise = {n: float(np.sqrt(v)) for n, v in zip(names, np.diag(cov_noise))}
+    # whether the views determine the focal length is a question about the poses, not about
+    # how well the model fits: the noise model's deviation answers it
+    worst = max(std_noise["fx"] / K[0, 0], std_noise["fy"] / K[1, 1])
     if worst > MAX_RELATIVE_FOCAL_STD:
         raise CalibrationError(
             f"the views do not determine the focal length (standard deviation {100 * worst:.0f}% of it, "
@@ -783,6 +836,9 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
         iterations=iters,
         object_points=obj,
         image_points=img,
+        std_noise_model=std_noise,
+        std_method=method,
+        covariance=cov,
     )
 
 

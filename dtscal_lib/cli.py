@@ -3,6 +3,7 @@
 Sub-commands::
 
     dtscal course                  open the course in JupyterLab (the student's workspace/; --instructor: solutions/)
+    dtscal handin                  zip the student's workspace notebooks into handin/NAME.zip
     dtscal synth --out data        regenerate the synthetic recorded Duckiebot session
     dtscal calibrate-intrinsics    frames -> camera_intrinsic/<ROBOT>.yaml
     dtscal calibrate-extrinsics    one frame on the board -> camera_extrinsic/<ROBOT>.yaml
@@ -21,9 +22,10 @@ import argparse
 import json
 import os
 import sys
+import warnings
 from pathlib import Path
 
-from .errors import DtscalError, ImplausibleCalibrationError
+from .errors import CalibrationFileWarning, DtscalError, ImplausibleCalibrationError
 
 #: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
 EXIT_REFUSED = 3
@@ -51,7 +53,7 @@ def _report_doubts(run) -> int:
     print("dtscal: warning: the kit does not believe this calibration:", file=sys.stderr)
     for d in run.doubts:
         print(f"  - {d}", file=sys.stderr)
-    where = f"kept as {run.path}" if run.path else "nothing written (--no-write)"
+    where = f"kept as {run.path}" if run.path else "nothing written (--no-write)"  # written unless --no-write
     print(f"dtscal: --keep-anyway: {where}; the robot's own file is unchanged", file=sys.stderr)
     return EXIT_REFUSED
 
@@ -83,9 +85,7 @@ def _master(args) -> None:
 
 
 def cmd_calibrate_intrinsics(args) -> int:
-    from .pipeline import calibrate_intrinsics
-
-    from .pipeline import parse_image_size
+    from .pipeline import calibrate_intrinsics, parse_image_size
 
     _master(args)
     run = calibrate_intrinsics(args.source, board=_board(args), model=args.model, skew=args.skew,
@@ -109,6 +109,7 @@ def cmd_calibrate_intrinsics(args) -> int:
         for n, v in zip(names, vals):
             print(f"  {n:5s} = {v:10.4f} +- {r.std.get(n, float('nan')):.4f}")
         print("  dist  = [" + ", ".join(f"{d:.6f}" for d in r.dist) + "]")
+        print("\n".join(quality.summary_lines(r.std_method)))  # sigma's method, what it means for a robot
         if run.tally.rejected:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
@@ -123,47 +124,28 @@ def cmd_calibrate_intrinsics(args) -> int:
 
 
 def _commit(args, run, kind: str):
-    """--commit: send the written file (or a temporary one with --no-write) to the robot; (reply, CommitError)."""
+    """--commit: send the result to the robot through its session; (reply, CommitError)."""
     from .robot import CommitError
 
     if not args.commit or run.doubts:  # a result the kit refused is never sent to the robot
         return None, None
     try:
-        return _send(args, run, kind), None
+        if kind == "intrinsics":
+            return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout), None
+        return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout, url=args.upload_url,
+                                  fmt=args.format), None
     except CommitError as exc:
         return None, exc
 
 
-def _send(args, run, kind: str) -> str:
-    import tempfile
-
-    from . import calib_files, robot
-
-    path = run.path
-    if path is None:  # --no-write: the robot still needs a file to read from
-        tmp = tempfile.mkdtemp(prefix="dtscal-commit-")
-        path = (calib_files.save_intrinsics(calib_files.IntrinsicCalibration.from_camera(
-                    run.result.camera(), camera_name=f"/{run.robot}/camera_node"), tmp, run.robot)
-                if kind == "intrinsics" else calib_files.save_extrinsics_as(
-                    run.H, tmp, run.robot, fmt=args.format, intrinsics=args.intrinsics))
-    if kind == "intrinsics":
-        return robot.commit_intrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout)
-    return robot.commit_extrinsics(run.robot, path, master_uri=args.master_uri, timeout=args.commit_timeout,
-                                   url=args.upload_url)
-
-
 def cmd_calibrate_extrinsics(args) -> int:
-    from . import calib_files
     from .pipeline import calibrate_extrinsics
 
     _master(args)
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
-                               out_dir=None if args.no_write or args.format != "classic" else args.out,
+                               out_dir=None if args.no_write else args.out, fmt=args.format,
                                topic=args.topic, progress=_progress(not args.quiet, "frames"),
                                keep_anyway=args.keep_anyway, max_seconds=args.max_seconds)
-    if args.format != "classic" and not args.no_write and not run.doubts:
-        run.path = calib_files.save_extrinsics_as(run.H, args.out, run.robot, fmt=args.format,
-                                                  intrinsics=args.intrinsics)
     committed, failed = _commit(args, run, "extrinsics")
     if args.json:
         _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
@@ -218,7 +200,7 @@ def cmd_release(args) -> int:
         print("notebooks/ matches solutions/")
         return 0
     if args.execute:
-        for p in release.execute_solutions(root / "solutions"):
+        for p in release.execute_solutions(root / "solutions", progress=True):
             print(f"executed {p}")
     if args.write or args.execute:
         for p in release.generate_notebooks(root / "solutions", root / "notebooks"):
@@ -246,6 +228,17 @@ def cmd_course(args) -> int:
     print("starting JupyterLab:", " ".join(cmd), file=sys.stderr)
     os.execv(sys.executable, cmd)
     return 0  # pragma: no cover
+
+
+def cmd_handin(args) -> int:
+    from .course import handin
+    from .paths import repo_root
+
+    path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
+    print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
+    print("hand in this file (upload it to Gradescope, or as your instructor says); with GitHub Classroom, "
+          "commit and push instead: git add workspace && git commit -m 'hand in' && git push")
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -316,6 +309,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
     sp.set_defaults(func=cmd_course)
 
+    sp = sub.add_parser("handin", help="zip your workspace notebooks into handin/NAME.zip to hand in")
+    sp.add_argument("--name", help="your name, for the file name (default: git's user.name, else your login)")
+    sp.add_argument("--out", metavar="FILE.zip", help="where to write the zip (default handin/NAME.zip)")
+    sp.set_defaults(func=cmd_handin)
+
     try:
         from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
     except ModuleNotFoundError:  # the student hand-out ships without the grader
@@ -335,17 +333,28 @@ def _no_grader(args) -> int:
 def release_args(sp) -> None:
     sp.add_argument("out", nargs="?", help="folder to write the student release into")
     sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
-    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/")
+    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/ (seconds; enough "
+                    "after a change to text or code that leaves the stored outputs as they are)")
     sp.add_argument("--execute", action="store_true",
                     help="re-run every solution notebook (storing its outputs), then regenerate notebooks/")
     sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")
     sp.set_defaults(func=cmd_release)
 
 
+def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    if issubclass(category, CalibrationFileWarning):
+        print(f"dtscal: warning: {message}", file=sys.stderr)
+    else:
+        print(warnings.formatwarning(message, category, filename, lineno, line), end="", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():  # a file read as Duckietown reads it, with a remark: one line, no traceback
+            warnings.simplefilter("always", CalibrationFileWarning)
+            warnings.showwarning = _print_warning
+            return int(args.func(args) or 0)
     except ImplausibleCalibrationError as exc:
         print(f"dtscal: error: {_cli_wording(str(exc))}", file=sys.stderr)
         return EXIT_REFUSED

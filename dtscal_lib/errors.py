@@ -91,6 +91,15 @@ class CalibrationFileError(DtscalError):
     """
 
 
+class CalibrationFileWarning(UserWarning):
+    """A calibration file the kit reads, as Duckietown's own loader does, but with something to say.
+
+    For example a ``projection_matrix`` whose third row is ``[0, 0, 1, 1]`` (Duckietown's
+    rectification uses only P's left 3x3), or an extrinsic ``H[1][2] > 0`` (a camera mounted
+    upside-down). The message names the file and the field; ``dtscal`` prints it as a warning.
+    """
+
+
 class SourceError(DtscalError):
     """A camera source (bag, video, folder, topic) cannot be opened or read."""
 

@@ -37,8 +37,10 @@ from . import duckietown as dt
 from .boards import DUCKIETOWN_BOARD, GROUND_NEAR_ROW_X, Board, ground_points, order_for_ground
 from .camera import CameraModel, as_points, rectify_image
 from .errors import CalibrationError, DtscalError, Reason
-from .detect import detect_board_still
+from .detect import detect_board_still, to_gray
+from .findings import Finding
 from .homography import apply_homography, as_homography, invert_homography
+from .limits import GROUND_CAMERA_LIMITS, MIRROR_MIN_CONTRAST
 
 #: default RANSAC inlier threshold, metres on the ground (Duckietown passes OpenCV's
 #: default of 3, which in metres rejects nothing; 1 cm rejects a mis-detected corner)
@@ -149,6 +151,8 @@ class ExtrinsicResult:
     residual_mm : (N,) float64 ``|H(corner) - ground|`` in millimetres
     rectified : the rectified image (H x W [x 3] uint8) the corners were found in
     image_center_ground : (2,) float64 ground point of the rectified image's centre, metres
+    pattern_contrast : :func:`board_pattern_contrast` of the board as ordered on the ground (grey
+        levels; negative when the frame is mirrored), None when the board's pattern cannot tell
     """
 
     H: np.ndarray
@@ -157,6 +161,7 @@ class ExtrinsicResult:
     residual_mm: np.ndarray
     rectified: np.ndarray
     image_center_ground: np.ndarray
+    pattern_contrast: float | None = None
 
     def to_dict(self) -> dict:
         """Plain-Python summary (no image) for JSON/YAML reports."""
@@ -169,6 +174,7 @@ class ExtrinsicResult:
             "corners_rectified": self.corners_rectified.tolist(),
             "ground": self.ground.tolist(),
             "image_center_ground": [float(v) for v in self.image_center_ground],
+            "pattern_contrast": None if self.pattern_contrast is None else float(self.pattern_contrast),
         }
 
 
@@ -194,15 +200,13 @@ def resize_to_width(image: np.ndarray, width: int = dt.IMAGE_SIZE[0]) -> np.ndar
     return cv2.resize(image, (int(width), new_h), interpolation=interp)
 
 
-def _find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, str]:
-    """Corners of the board in the rectified frame: ``(corners (N, 2) or None, reason)``.
+def _find_corners(image: np.ndarray, board: Board):
+    """The board in the rectified frame: a :class:`~dtscal_lib.detect.Detection`.
 
-    ``reason`` is ``"found"``, ``"no_board"`` or ``"at_border"``. One still frame, so the
-    thorough detector (:func:`dtscal_lib.detect.detect_board_still`) is affordable: on the
-    rectified floor view the far squares are only about 12 px tall.
+    One still frame, so the thorough detector (:func:`dtscal_lib.detect.detect_board_still`) is
+    affordable: on the rectified floor view the far squares are only about 12 px tall.
     """
-    det = detect_board_still(image, board, border_margin=dt.BORDER_MARGIN_PX)
-    return det.corners, "found" if det.found else det.reason
+    return detect_board_still(image, board, border_margin=dt.BORDER_MARGIN_PX)
 
 
 def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
@@ -244,7 +248,15 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
             "use frames from the calibrated camera mode", reason=Reason.SIZE_MISMATCH,
         )
     rectified = rectify_image(frame, camera.rectification_maps())
-    corners, reason = _find_corners(rectified, board)
+    det = _find_corners(rectified, board)
+    corners, reason = det.corners, ("found" if det.found else det.reason)
+    if reason == Reason.INCONSISTENT_GRID:
+        raise CalibrationError(
+            f"the board ({board.describe()}) was found in the rectified image but rejected: {det.detail}. "
+            "A smoothly curled print passes this check; a corner that jumps off its neighbours' grid is "
+            "mis-detected (glare, a crease, a shadow or clutter on that corner): flatten the board, "
+            "light it evenly and take another frame", reason=Reason.INCONSISTENT_GRID,
+        )
     if reason == Reason.AT_BORDER:
         raise CalibrationError(
             f"the board ({board.describe()}) was found but some corners are within {dt.BORDER_MARGIN_PX} px "
@@ -277,14 +289,46 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
     except DtscalError:
         raise CalibrationError("the image centre lies on the horizon of the fitted homography; "
                                "the camera must look down at the ground", reason=Reason.HORIZON) from None
-    return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground)
+    return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground,
+                           board_pattern_contrast(rectified, ordered, board))
+
+
+def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN_BOARD) -> float | None:
+    """Is the board seen from above the right way round? Grey-level contrast of its printed pattern.
+
+    The board's squares between the inner corners, in ground order (:func:`~dtscal_lib.boards.order_for_ground`:
+    square ``(r, c)`` is the ``r``-th row away from the robot and the ``c``-th column from its right),
+    are dark when ``r + c`` is even on Duckietown's printed pattern (the square outside the
+    near-right inner corner is dark, and a checkerboard alternates). Returns the mean grey level of
+    the squares that should be light minus that of those that should be dark: large and positive
+    for a board seen the right way round, negative for a mirrored frame (a mirror swaps the
+    colours of the squares against their ground positions, a rotation of the board by 180 degrees
+    does not). ``None`` for boards whose pattern cannot tell a mirror from a rotation (an even
+    number of inner corners across or along).
+
+    Parameters
+    ----------
+    image : the rectified frame (grey or BGR) the corners were found in
+    ordered : (N, 2) pixels in ground order
+    """
+    if board.cols % 2 == 0 or board.rows % 2 == 0:
+        return None
+    grey = to_gray(image).astype(np.float32)
+    g = np.asarray(ordered, dtype=np.float64).reshape(board.rows, board.cols, 2)
+    centres = (g[:-1, :-1] + g[:-1, 1:] + g[1:, :-1] + g[1:, 1:]) / 4.0
+    grey = cv2.blur(grey, (3, 3))
+    pts = centres.reshape(-1, 2).astype(np.float32)
+    vals = cv2.remap(grey, pts[:, 0].reshape(-1, 1), pts[:, 1].reshape(-1, 1), cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE).reshape(board.rows - 1, board.cols - 1)
+    r, c = np.mgrid[0:board.rows - 1, 0:board.cols - 1]
+    dark = (r + c) % 2 == 0
+    return float(vals[~dark].mean() - vals[dark].mean())
 
 
 # --------------------------------------------------------------------------- plausibility
-#: what a ground homography must say about the camera that looks at the ground in front of a robot
-GROUND_CAMERA_LIMITS = {"height_m": (0.03, 0.5), "pitch_down_deg": (2.0, 75.0), "abs_yaw_deg": 30.0,
-                        "axis_ratio": 1.15, "axis_angle_error_deg": 8.0}
-
+#: what a ground homography must say about the camera that looks at the ground in front of a robot:
+#: rows of the one table of belief (:mod:`dtscal_lib.limits`), from Duckietown's real fleet
+#: (camera 0.10-0.12 m high, 16-25 degrees down; ground-axis ratios: 95 % under 1.08, at most 1.22)
 
 def camera_pose_from_homography(H, K) -> dict:
     """The camera's pose over the ground, recovered from a ground homography and ``K``.
@@ -316,11 +360,30 @@ def camera_pose_from_homography(H, K) -> dict:
             "axis_angle_deg": float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))}
 
 
-def ground_homography_doubts(H, K) -> list[str]:
-    """Reasons to disbelieve that ``H`` shows a robot's camera looking down at the ground ahead.
+def _turned_board(H, board: Board) -> np.ndarray:
+    """``H`` with the ground turned 180 degrees about the board's centre: the homography of an
+    upside-down camera whose corners were ordered by their image position (the fleet's ``H[1][2] > 0``)."""
+    xc = float(ground_points(board)[:, 0].mean())
+    T = np.array([[-1.0, 0.0, 2.0 * xc], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
+    Ht = T @ H
+    return Ht / Ht[2, 2]
 
-    Checks Duckietown's ``H[1][2] <= 0`` rule and the pose of :func:`camera_pose_from_homography`
-    against :data:`GROUND_CAMERA_LIMITS`. An empty list means plausible.
+
+def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD,
+                             pattern_contrast: float | None = None) -> list[Finding]:
+    """Reasons to disbelieve that ``H`` shows a Duckiebot's camera looking down at the ground ahead.
+
+    The pose of :func:`camera_pose_from_homography` is checked against :data:`GROUND_CAMERA_LIMITS`
+    (a Duckiebot's camera height, pitch and heading, from Duckietown's real fleet; a board size
+    wrong by a factor of 1.5 or more puts the camera outside the height range), and the board must
+    have been seen the right way round (``pattern_contrast`` from :func:`board_pattern_contrast`,
+    when known: a mirrored frame gives a homography that looks right but puts the robot's left on
+    its right). Each doubt is a :class:`~dtscal_lib.findings.Finding`; an empty list means plausible.
+
+    ``H[1][2] > 0`` is not a doubt by itself: Duckietown refuses to *write* such a homography, but its
+    fleet has them, from cameras mounted upside-down (the image rotated 180 degrees, the corners
+    ordered by their image position, so the ground comes out turned about the board's centre);
+    such a file is judged as that camera, turned back.
 
     >>> from dtscal_lib import duckietown as dt
     >>> from dtscal_lib.camera import CameraModel
@@ -330,28 +393,51 @@ def ground_homography_doubts(H, K) -> list[str]:
     """
     H = _homography(H)
     lim = GROUND_CAMERA_LIMITS
-    out = []
-    if dt.homography_is_corrupt(H):
-        out.append(f"H[1][2] = {H[1, 2]:.3g} > 0, which Duckietown rejects as corrupt (mirrored or mis-ordered board)")
-    pose = camera_pose_from_homography(H, K)
+    out: list[Finding] = []
+
+    def doubt(code, message, advice):
+        out.append(Finding(code, "bad", message, advice))
+
+    rotated = dt.homography_is_corrupt(H)
+    pose = camera_pose_from_homography(_turned_board(H, board) if rotated else H, K)
+    place = ("place the robot on the board as instructed and check --square and --board against the printed "
+             "board")
     lo, hi = lim["height_m"]
     if not lo <= pose["height_m"] <= hi:
-        out.append(f"the camera would be {pose['height_m']:.3f} m above the ground (a robot's camera: {lo}-{hi} m)")
+        factor = pose["height_m"] / ((lo + hi) / 2)
+        doubt("camera_height",
+              f"the camera would be {pose['height_m']:.3f} m above the ground (a Duckiebot's camera: {lo:g}-{hi:g} m)"
+              + ((f"; printed squares {factor:.1f} times smaller than --square says would explain it" if factor > 1
+                  else f"; printed squares {1 / factor:.1f} times larger than --square says would explain it")
+                 if factor > 0 else ""),
+              "check --square against the printed board (Duckietown's: 0.031 m) and that the intrinsics are "
+              "this camera's")
     lo, hi = lim["pitch_down_deg"]
     if not lo <= pose["pitch_down_deg"] <= hi:
-        out.append(f"the camera would look {pose['pitch_down_deg']:.1f} degrees below the horizon "
-                   f"(looking down at the ground ahead: {lo:g}-{hi:g})")
+        doubt("camera_pitch",
+              f"the camera would look {pose['pitch_down_deg']:.1f} degrees below the horizon (a Duckiebot's "
+              f"camera: {lo:g}-{hi:g})", place)
     if abs(pose["yaw_deg"]) > lim["abs_yaw_deg"]:
-        out.append(f"the camera would look {pose['yaw_deg']:.0f} degrees to the side of the robot's forward "
-                   f"axis (at most {lim['abs_yaw_deg']:g})")
+        doubt("camera_yaw",
+              f"the camera would look {pose['yaw_deg']:.0f} degrees to the side of the robot's forward axis "
+              f"(at most {lim['abs_yaw_deg']:g})", place)
     if pose["position_m"][0] >= GROUND_NEAR_ROW_X:
-        out.append(f"the camera would stand {pose['position_m'][0]:.3f} m ahead of the axle, on or beyond the "
-                   f"board (its near row is at {GROUND_NEAR_ROW_X} m)")
+        doubt("camera_position",
+              f"the camera would stand {pose['position_m'][0]:.3f} m ahead of the axle, on or beyond the board "
+              f"(its near row is at {GROUND_NEAR_ROW_X} m)", place)
     ratio = max(pose["axis_ratio"], 1 / pose["axis_ratio"])
     if ratio > lim["axis_ratio"] or abs(pose["axis_angle_deg"] - 90) > lim["axis_angle_error_deg"]:
-        out.append(f"the homography is not a view of a flat ground through this camera (ground axes scaled "
-                   f"{ratio:.2f}:1 and {pose['axis_angle_deg']:.0f} degrees apart; expected 1:1 and 90): "
-                   "wrong intrinsics, or the board was not lying flat")
+        doubt("not_a_plane_view",
+              f"the homography is not a view of a flat ground through this camera (ground axes scaled "
+              f"{ratio:.2f}:1 and {pose['axis_angle_deg']:.0f} degrees apart; expected 1:1 and 90)",
+              "check the intrinsics (--intrinsics) and that the board was lying flat")
+    if pattern_contrast is not None and pattern_contrast < -MIRROR_MIN_CONTRAST:
+        doubt("mirrored",
+              f"the board is seen mirrored: its squares have the colours of a mirror image (light where the "
+              f"printed pattern is dark, contrast {pattern_contrast:.0f} grey levels), so the homography would "
+              "put the robot's left on its right",
+              "use the camera's own frames, not mirrored ones (a flipped video, a mirrored webcam or a selfie "
+              "camera), and Duckietown's printed board")
     return out
 
 

@@ -1,119 +1,30 @@
-"""The headless calibration pipeline: frames in, Duckietown calibration files out.
+"""The headless calibration pipeline: frames of a recording (or a live camera) in, Duckietown calibration files out.
 
-These are the functions behind ``dtscal calibrate-intrinsics`` and
-``dtscal calibrate-extrinsics``; the Duckiebot camera notebook (06) runs the same steps frame by frame.
-Nothing here raises on a bad frame: every unusable frame is counted under a reason
-and skipped. Errors are raised only when the run as a whole cannot produce a
-calibration, and then the message says what to do.
+These are the functions behind ``dtscal calibrate-intrinsics`` and ``dtscal calibrate-extrinsics``: thin
+drivers of :mod:`dtscal_lib.session` (where the calibration happens, and the same session the live tools
+drive). Nothing here raises on a bad frame: every unusable frame is counted under a reason and skipped.
+Errors are raised only when the run as a whole cannot produce a calibration, and then the message says
+what to do.
 """
 
 from __future__ import annotations
 
 import re
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
 
-import cv2
 import numpy as np
 
-from . import calib_files
 from .boards import DUCKIETOWN_BOARD, Board
-from .calibration import CalibrationResult, calibrate
-from .camera import as_size
-from .coverage import CoverageTracker
-from .detect import detect_board
-from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError, Reason, opencv_message
-from .plausibility import intrinsic_doubts
-from .sources import Frame, open_source
+from .calibration import CalibrationResult
+from .errors import DtscalError
+from .session import (MAX_OUTLIER_SHARE, MIN_SAMPLES, OUTLIER_FACTOR, ExtrinsicSession,  # noqa: F401
+                      FrameTally, IntrinsicSession, SizeGroups, calibrate_without_outlier_views, robot_from_topic,
+                      robot_name)
+from .sources import open_source
 from .sources.headers import MAX_PIXELS, MAX_SIDE
 from .validation import check_board, check_image_size, check_output_folder
-
-#: fewer samples than this cannot give a trustworthy calibration
-MIN_SAMPLES = 3
-#: a view whose own reprojection RMS exceeds this many times the median view's is an outlier
-OUTLIER_FACTOR = 3.0
-#: never drop more than this share of the views as outliers
-MAX_OUTLIER_SHARE = 0.2
-
-
-def calibrate_without_outlier_views(object_points, image_points, image_size, **kw):
-    """Calibrate, drop views that fit far worse than the rest, calibrate again.
-
-    A detection can be wrong without looking wrong: on a motion-blurred frame the
-    detector may put a corner a pixel off. Such a view fits much worse than the
-    others (its own RMS is several times the median view's) and biases K by more
-    than the reported standard deviations admit. Views above ``OUTLIER_FACTOR`` x the
-    median per-view RMS are dropped (at most ``MAX_OUTLIER_SHARE`` of them, worst first)
-    and the calibration is repeated, until no view stands out.
-
-    The repeated calibration starts from the previous solution (its camera and the kept views'
-    poses: ``calibrate(..., initial=...)``), which is next to the new optimum, instead of searching
-    from the closed form again; should that refinement fail, the views are calibrated from scratch.
-
-    Returns
-    -------
-    (CalibrationResult, list of dropped view indices into the inputs)
-    """
-    keep = list(range(len(object_points)))
-    dropped: list[int] = []
-    result = calibrate(object_points, image_points, image_size, **kw)
-    budget = int(MAX_OUTLIER_SHARE * len(keep))
-    while True:
-        pv = np.asarray(result.per_view_rms)
-        limit = OUTLIER_FACTOR * float(np.median(pv))
-        worst = [k for k in np.argsort(-pv) if pv[k] > limit]
-        worst = worst[: max(0, min(budget - len(dropped), len(keep) - MIN_SAMPLES))]
-        if not worst:
-            return result, sorted(dropped)
-        dropped += [keep[k] for k in worst]
-        keep = [i for k, i in enumerate(keep) if k not in set(worst)]
-        kept = [k for k in range(len(pv)) if k not in set(worst)]
-        start = (result.K, result.dist, result.rvecs[kept], result.tvecs[kept])
-        views = ([object_points[i] for i in keep], [image_points[i] for i in keep], image_size)
-        try:
-            result = calibrate(*views, initial=start, **kw)
-        except CalibrationError:  # the warm start went astray: search from the closed form as the first fit did
-            result = calibrate(*views, **kw)
-
-
-@dataclass
-class FrameTally:
-    """How the frames of a run were used."""
-
-    total: int = 0
-    used: int = 0
-    rejected: Counter = field(default_factory=Counter)
-
-    def reject(self, reason: str) -> None:
-        self.rejected[reason] += 1
-
-    def to_dict(self) -> dict:
-        return {"total": self.total, "used": self.used, "rejected": dict(sorted(self.rejected.items()))}
-
-
-def usable_images(frames: Iterable[Frame], tally: FrameTally, size: tuple[int, int] | None = None):
-    """Yield ``(frame, image)`` for frames that decode to an image (of ``size`` when given).
-
-    Undecodable frames are counted under their own reason; with ``size`` given, frames of
-    another size are counted as ``size_mismatch``. No frame fixes the size for the others:
-    which size a calibration uses is decided from the frames that show the board
-    (:class:`SizeGroups`).
-    """
-    for frame in frames:
-        tally.total += 1
-        if frame.error is not None or frame.image is None:
-            tally.reject(getattr(frame.error, "reason", None) or Reason.UNREADABLE)
-            continue
-        img = frame.image
-        if img.ndim < 2 or img.size == 0:
-            tally.reject(Reason.EMPTY)
-            continue
-        if size is not None and (int(img.shape[1]), int(img.shape[0])) != tuple(size):
-            tally.reject(Reason.SIZE_MISMATCH)
-            continue
-        yield frame, img
 
 
 def parse_image_size(text: str | None) -> tuple[int, int] | None:
@@ -134,94 +45,17 @@ def parse_image_size(text: str | None) -> tuple[int, int] | None:
     return w, h
 
 
-@dataclass
-class _SizeGroup:
-    tracker: CoverageTracker
-    tally: FrameTally = field(default_factory=FrameTally)
-    found: int = 0
-    obj: list = field(default_factory=list)
-    img: list = field(default_factory=list)
+def _robot(robot: str | None, src, writing: bool) -> str:
+    """The robot of the run (:func:`~dtscal_lib.session.robot_name`); checked up front when a file is written."""
+    from .calib_files import check_robot_name
 
-
-class SizeGroups:
-    """Detections kept per image size until the calibration's size is known.
-
-    A 1x1 thumbnail that sorts first must not decide the size of a calibration: each size
-    gets its own coverage tracker and tally, and :meth:`resolve` picks the size in which the
-    board was found most often (or the given one); every frame of another size is then
-    counted as ``size_mismatch``.
-    """
-
-    def __init__(self, board: Board, image_size: tuple[int, int] | None = None):
-        self.board = board
-        self.image_size = None if image_size is None else as_size(image_size, name="image_size")
-        self.groups: dict[tuple[int, int], _SizeGroup] = {}
-
-    def ready(self) -> bool:
-        """True once some size's coverage enables CALIBRATE (a live camera stops collecting then)."""
-        return any(g.tracker.ready() for g in self.groups.values())
-
-    def group(self, img: np.ndarray) -> _SizeGroup:
-        size = (int(img.shape[1]), int(img.shape[0]))
-        if size not in self.groups:
-            self.groups[size] = _SizeGroup(CoverageTracker(self.board, size))
-        return self.groups[size]
-
-    def resolve(self, tally: FrameTally) -> tuple[tuple[int, int], _SizeGroup] | None:
-        """The calibration's size and its group; merges every group's counts into ``tally``."""
-        if self.image_size is not None:
-            size = self.image_size
-        elif self.groups:
-            size = max(self.groups, key=lambda s: (self.groups[s].found, self.groups[s].tally.total))
-        else:
-            return None
-        for other, g in self.groups.items():
-            if other != size:
-                tally.rejected[Reason.SIZE_MISMATCH] += g.tally.total
-        chosen = self.groups.get(size)
-        if chosen is None:
-            return None
-        tally.used += chosen.tally.used
-        tally.rejected.update(chosen.tally.rejected)
-        return size, chosen
-
-
-def robot_from_topic(topic: str | None) -> str | None:
-    """``/autobot01/camera_node/image/compressed`` -> ``autobot01``."""
-    if not topic:
-        return None
-    m = re.match(r"^/([A-Za-z0-9_]+)/camera_node/", topic)
-    return m.group(1) if m else None
-
-
-def _robot_name(robot: str | None, source) -> str:
-    """The robot whose file is written, checked before any work is done."""
-    if robot:
-        return calib_files.check_robot_name(robot)
-    guess = robot_from_topic(getattr(source, "topic", None))
-    if guess:
-        return calib_files.check_robot_name(guess)
-    raise DtscalError(
-        "cannot tell which robot this is from the source; pass --robot NAME "
-        "(the calibration is written as camera_intrinsic/NAME.yaml)"
-    )
-
-
-def _refuse_or_keep(doubts: list[str], kind: str, robot: str, out_dir, keep_anyway: bool, write) -> Path | None:
-    """Refuse a calibration the kit does not believe, or (``keep_anyway``) write it as ``ROBOT.rejected.yaml``.
-
-    ``write(rejected: bool) -> Path`` writes the file. Returns the path of the kept file
-    (or ``None`` when nothing is written); raises :class:`ImplausibleCalibrationError` otherwise.
-    """
-    if keep_anyway:
-        return write(True) if out_dir is not None else None
-    listed = "".join(f"\n  - {d}" for d in doubts)
-    where = f"camera_{kind}/{robot}.yaml"
-    raise ImplausibleCalibrationError(
-        f"refusing to write {where}: the kit does not believe this {kind} calibration:{listed}\n"
-        f"Nothing was written; the previous {where} (if any) is unchanged. Record again as described, or, as an "
-        f"expert, rerun with keep_anyway=True to keep the result as camera_{kind}/{robot}"
-        f"{calib_files.REJECTED_SUFFIX}.yaml beside it", doubts)
+    name = robot_name(getattr(src, "spec", None), src, robot)
+    if not writing:
+        return name or "camera"
+    if not name:
+        raise DtscalError("cannot tell which robot this is from the source; pass --robot NAME "
+                          "(the calibration is written as camera_intrinsic/NAME.yaml)")
+    return check_robot_name(name)
 
 
 @dataclass
@@ -235,6 +69,8 @@ class IntrinsicRun:
     path: Path | None = None
     #: why the kit does not believe the result (kept with keep_anyway); empty when plausible
     doubts: list = field(default_factory=list)
+    #: the session that made it (judge, write in another format, commit)
+    session: IntrinsicSession | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
         out = self.result.to_dict()
@@ -245,7 +81,7 @@ class IntrinsicRun:
             frames=self.tally.to_dict(),
             coverage={b.name: round(float(b.progress), 4) for b in self.bars},
             output=str(self.path) if self.path else None,
-            doubts=list(self.doubts),
+            doubts=[str(d) for d in self.doubts],
         )
         return out
 
@@ -286,77 +122,20 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         ``size_mismatch`` and skipped.
     """
     check_board(board)
-    groups = SizeGroups(board, image_size)
-    src = _open_frames(source_spec, topic, max_seconds, groups.ready)
-    robot_name = (_robot_name(robot, src) if out_dir is not None
-                  else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
+    session = IntrinsicSession(board, model=model, skew=skew, image_size=image_size)
+    src = _open_frames(source_spec, topic, max_seconds, session.ready)
+    session.robot = _robot(robot, src, out_dir is not None)
+    session.stream, session.source = src.is_stream, src.describe()
     if out_dir is not None:
         check_output_folder(out_dir)
-    tally = FrameTally()
-    frames = progress(src) if progress else src
-    for frame, img in usable_images(frames, tally):
-        group = groups.group(img)
-        group.tally.total += 1
-        if groups.image_size not in (None, group.tracker.image_size):
-            continue  # not the requested size: no detection, counted as size_mismatch at the end
-        try:
-            det = detect_board(img, board)
-        except DtscalError as exc:  # a frame the detector cannot take: count it, go on
-            group.tally.reject(getattr(exc, "reason", None) or Reason.BAD_FRAME)
-            continue
-        except cv2.error:  # OpenCV choking on one odd frame must not end the run
-            group.tally.reject(Reason.DETECTOR_ERROR)
-            continue
-        if not det.found:
-            group.tally.reject(det.reason or Reason.NO_BOARD)
-            continue
-        group.found += 1
-        if src.is_stream:
-            if group.tracker.offer(det):
-                group.tally.used += 1
-            else:
-                group.tally.reject(Reason.NOT_NEW_COVERAGE)
-        else:
-            group.tracker.offer(det)  # keeps the bars meaningful for stills too
-            group.obj.append(board.object_points())
-            group.img.append(det.corners)
-            group.tally.used += 1
-    tally.rejected.update(getattr(src, "bad", {}))  # corrupt frames a live source skipped
-    resolved = groups.resolve(tally)
-    if resolved is None and groups.groups:
-        seen = ", ".join(f"{w}x{h}" for w, h in groups.groups)
-        raise DtscalError(f"{src.describe()}: no frame has the requested image size {image_size[0]}x{image_size[1]} "
-                          f"(sizes found: {seen}); pass the size of the camera's frames")
-    if resolved is None:
-        raise DtscalError(f"{src.describe()}: no readable frame ({tally.total} frames, rejected: "
-                          f"{dict(tally.rejected) or 'none'}); check the path and the topic")
-    size, group = resolved
-    tracker = group.tracker
-    if src.is_stream:
-        obj, imgp = tracker.object_and_image_points()
-    else:
-        obj, imgp = group.obj, group.img
-    if len(obj) < MIN_SAMPLES:
-        raise CalibrationError(
-            f"only {len(obj)} usable view(s) of the {board.describe()} board in {src.describe()} "
-            f"({tally.total} frames; rejected: {dict(tally.rejected)}). Calibration needs at least "
-            f"{MIN_SAMPLES} views at different positions and tilts: check --board/--square, and show the "
-            "whole board (not touching the image border) at several places and angles"
-        )
-    result, dropped = calibrate_without_outlier_views(obj, imgp, size, model=model, skew=skew)
-    if dropped:
-        tally.used -= len(dropped)
-        tally.rejected[Reason.OUTLIER_VIEW] += len(dropped)
-    run = IntrinsicRun(result, robot_name, tally, len(obj) - len(dropped), tracker.bars(), src.describe())
-    calib = calib_files.IntrinsicCalibration.from_camera(result.camera(), camera_name=f"/{robot_name}/camera_node")
-    gone = set(dropped)
-    run.doubts = intrinsic_doubts(result, [p for i, p in enumerate(imgp) if i not in gone])
-    if run.doubts:
-        run.path = _refuse_or_keep(run.doubts, "intrinsic", robot_name, out_dir, keep_anyway,
-                                   lambda rejected: calib_files.save_intrinsics(calib, out_dir, robot_name,
-                                                                                rejected=rejected))
-    elif out_dir is not None:
-        run.path = calib_files.save_intrinsics(calib, out_dir, robot_name)
+    for frame in (progress(src) if progress else src):
+        session.offer(frame)
+    session.skipped(getattr(src, "bad", {}))  # corrupt frames a live source skipped
+    result = session.calibrate()
+    run = IntrinsicRun(result, session.robot, session.tally(), result.n_views, session.bars(), session.source,
+                       session=session)
+    run.path = session.write(out_dir, keep_anyway)
+    run.doubts = session.doubts
     return run
 
 
@@ -374,6 +153,8 @@ class ExtrinsicRun:
     camera_pose: dict = field(default_factory=dict)
     #: why the kit does not believe the homography (kept with keep_anyway); empty when plausible
     doubts: list = field(default_factory=list)
+    #: the session that made it (write in another format, commit)
+    session: ExtrinsicSession | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
         return {
@@ -386,66 +167,46 @@ class ExtrinsicRun:
             "frames": self.tally.to_dict(),
             "output": str(self.path) if self.path else None,
             "camera_pose": dict(self.camera_pose),
-            "doubts": list(self.doubts),
+            "doubts": [str(d) for d in self.doubts],
         }
 
 
 def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIETOWN_BOARD,
                          robot: str | None = None, out_dir=None, topic: str | None = None,
-                         progress=None, keep_anyway: bool = False, max_seconds: float | None = None) -> ExtrinsicRun:
+                         progress=None, keep_anyway: bool = False, max_seconds: float | None = None,
+                         fmt: str = "classic") -> ExtrinsicRun:
     """Duckietown's extrinsic procedure on the first usable frame of a source.
 
     ``intrinsics_file`` is a Duckietown intrinsic YAML; the homography maps pixels of the
     image rectified with that file's ``P`` to ground metres (robot frame: x forward,
-    y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given, if the
-    homography describes a camera looking down at the ground ahead
-    (:func:`~dtscal_lib.ground.ground_homography_doubts`); ``keep_anyway`` as in :func:`calibrate_intrinsics`.
+    y left). ``out_dir/camera_extrinsic/<robot>.yaml`` is written when ``out_dir`` is given, in the
+    classic format or (``fmt="2"``) Duckietown's version 2, if the homography describes a camera
+    looking down at the ground ahead (:func:`~dtscal_lib.ground.ground_homography_doubts`);
+    ``keep_anyway`` as in :func:`calibrate_intrinsics` (the rejected file in the same format).
     """
-    from .ground import extrinsics_from_image as fit_on_image
-    from .ground import camera_pose_from_homography, ground_homography_doubts
+    from . import calib_files
 
     check_board(board)
     calib = calib_files.load_intrinsics(intrinsics_file)
     check_image_size(calib.size, name=f"{intrinsics_file}: image_width x image_height",
                      hint="; give the intrinsic file of the camera that took these frames (--intrinsics)")
-    camera = calib.camera()
     src = _open_frames(source_spec, topic, max_seconds)
-    robot_name = (_robot_name(robot, src) if out_dir is not None
-                  else (robot or robot_from_topic(getattr(src, "topic", None)) or "camera"))
+    session = ExtrinsicSession(calib.camera(), board, robot=_robot(robot, src, out_dir is not None),
+                               keep="first", intrinsics=calib, source=src.describe())
     if out_dir is not None:
         check_output_folder(out_dir)
-    tally = FrameTally()
-    frames = progress(src) if progress else src
-    last_error = None
-    for frame, img in usable_images(frames, tally):
-        try:
-            res = fit_on_image(img, camera, board)
-        except DtscalError as exc:  # counted under the frame's own reason (size, NaN, board, homography)
-            tally.reject(getattr(exc, "reason", None) or Reason.HOMOGRAPHY_FAILED)
-            last_error = exc
-            continue
-        except cv2.error as exc:  # OpenCV choking on one odd frame must not end the run
-            tally.reject(Reason.DETECTOR_ERROR)
-            last_error = opencv_message(exc)
-            continue
-        tally.used += 1
-        run = ExtrinsicRun(robot_name, res.H, frame.index, tally, np.asarray(res.residual_mm),
-                           np.asarray(res.image_center_ground), src.describe(),
-                           camera_pose=camera_pose_from_homography(res.H, camera.P[:, :3]),
-                           doubts=ground_homography_doubts(res.H, camera.P[:, :3]))
-        if run.doubts:
-            run.path = _refuse_or_keep(run.doubts, "extrinsic", robot_name, out_dir, keep_anyway,
-                                       lambda rejected, H=res.H: calib_files.save_extrinsics(H, out_dir, robot_name,
-                                                                                    rejected=rejected))
-        elif out_dir is not None:
-            run.path = calib_files.save_extrinsics(res.H, out_dir, robot_name)
-        return run
-    raise CalibrationError(
-        f"no frame of {src.describe()} gave a ground homography ({tally.total} frames; rejected: "
-        f"{dict(tally.rejected)})" + (f"; last problem: {last_error}" if last_error else "")
-        + ". Place the robot on the board as in the Duckietown procedure, with the whole board in view"
-    )
+    for frame in (progress(src) if progress else src):
+        if session.offer(frame).added:
+            break
+    res = session.calibrate()
+    run = ExtrinsicRun(session.robot, res.H, session.best_frame, session.tally(), np.asarray(res.residual_mm),
+                       np.asarray(res.image_center_ground), session.source, camera_pose=session.camera_pose(),
+                       session=session)
+    run.path = session.write(out_dir, keep_anyway, fmt)
+    run.doubts = session.doubts
+    return run
 
 
 __all__ = ["calibrate_intrinsics", "calibrate_extrinsics", "IntrinsicRun", "ExtrinsicRun", "FrameTally",
-           "usable_images", "SizeGroups", "robot_from_topic"]
+           "SizeGroups", "robot_from_topic", "parse_image_size", "calibrate_without_outlier_views",
+           "MIN_SAMPLES"]

@@ -8,8 +8,10 @@ what speaks against an intrinsic result; the ground homography's counterpart is
 result with doubts (:class:`~dtscal_lib.errors.ImplausibleCalibrationError`, exit code 3
 of ``dtscal``) unless the user keeps it anyway, beside the robot's file.
 
-Limits (:data:`INTRINSIC_LIMITS`) are loose on purpose: every real camera a course
-meets passes them, and a refusal always says what to do.
+Each doubt is a :class:`~dtscal_lib.findings.Finding` (severity ``"bad"``: a refusal) whose
+``str()`` is the message and what to do. The limits (:data:`INTRINSIC_LIMITS`) are rows of the one
+table of belief, :mod:`dtscal_lib.limits`, each with its reason and data source; they are loose on
+purpose: every real camera a course meets passes them, and a refusal always says what to do.
 """
 
 from __future__ import annotations
@@ -17,27 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from .calibration import CalibrationResult, board_normal_spread
+from .findings import Finding
+from .limits import INTRINSIC_LIMITS
 
 __all__ = ["INTRINSIC_LIMITS", "distinct_board_images", "intrinsic_doubts"]
-
-INTRINSIC_LIMITS = {
-    # reprojection RMS, pixels: ROS calls well under 0.5 px good; beyond 1 px a corner or the model is wrong
-    "max_rms_px": 1.0,
-    # horizontal field of view, degrees: from a tele lens to a fisheye
-    "fov_deg": (10.0, 170.0),
-    # fx / fy: square pixels give 1
-    "aspect": (0.8, 1.25),
-    # principal point's offset from the image centre, as a fraction of the image side
-    "max_centre_offset": 0.2,
-    # board normals must spread by this many degrees (the tilt that pins the focal length down)
-    "min_tilt_spread_deg": 10.0,
-    # standard deviation of fx and fy relative to them
-    "max_relative_focal_std": 0.02,
-    # views that differ only by a shift in the image count as one board image; at least this many distinct
-    "min_distinct_views": 3,
-    # rms difference (pixels) below which two views' centred corners count as the same board image
-    "same_image_px": 1.0,
-}
 
 
 def distinct_board_images(image_points, same_px: float = INTRINSIC_LIMITS["same_image_px"]) -> int:
@@ -63,8 +48,8 @@ def distinct_board_images(image_points, same_px: float = INTRINSIC_LIMITS["same_
     return len(reps)
 
 
-def intrinsic_doubts(result: CalibrationResult, image_points=None) -> list[str]:
-    """Reasons not to believe an intrinsic calibration; an empty list means plausible.
+def intrinsic_doubts(result: CalibrationResult, image_points=None) -> list[Finding]:
+    """Reasons not to believe an intrinsic calibration, as Findings; an empty list means plausible.
 
     Parameters
     ----------
@@ -75,33 +60,45 @@ def intrinsic_doubts(result: CalibrationResult, image_points=None) -> list[str]:
     K, (w, h) = np.asarray(result.K), result.image_size
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     out = []
+
+    def doubt(code, message, advice, views=()):
+        out.append(Finding(code, "bad", message, advice, list(views)))
+
     if image_points is not None:
         n = distinct_board_images(image_points)
         if n < lim["min_distinct_views"]:
-            out.append(f"the {len(image_points)} views show only {n} distinct board image(s); the others are the "
-                       "same image shifted in the picture, which says nothing about the focal length. Tilt and "
-                       "turn the board between views")
+            doubt("shifted_copies",
+                  f"the {len(image_points)} views show only {n} distinct board image(s); the others are the "
+                  "same image shifted in the picture, which says nothing about the focal length",
+                  "tilt and turn the board between views")
     spread = board_normal_spread(result.rvecs)
     if spread < lim["min_tilt_spread_deg"]:
-        out.append(f"the boards were tilted too little (normals within {spread:.1f} degrees of their mean; at least "
-                   f"{lim['min_tilt_spread_deg']:g} needed). Tilt the board 20-45 degrees left/right and up/down")
+        doubt("parallel_views",
+              f"the boards were tilted too little (normals within {spread:.1f} degrees of their mean; at least "
+              f"{lim['min_tilt_spread_deg']:g} needed)", "tilt the board 20-45 degrees left/right and up/down")
     if result.rms > lim["max_rms_px"]:
-        out.append(f"the reprojection RMS is {result.rms:.2f} px (at most {lim['max_rms_px']:g}): check --board and "
-                   "--square against the printed board, and that the board is flat and sharp in the frames")
+        doubt("rms", f"the reprojection RMS is {result.rms:.2f} px (at most {lim['max_rms_px']:g})",
+              "check --board and --square against the printed board, and that the board is flat and sharp in "
+              "the frames")
     fov = float(np.degrees(2 * np.arctan2(w / 2.0, fx)))
     lo, hi = lim["fov_deg"]
     if not lo <= fov <= hi:
-        out.append(f"fx = {fx:.1f} px gives a {fov:.0f}-degree field of view across {w} px (plausible: {lo:g}-{hi:g})")
+        doubt("field_of_view",
+              f"fx = {fx:.1f} px gives a {fov:.0f}-degree field of view across {w} px (plausible: {lo:g}-{hi:g})",
+              "check --square and the image size, and recalibrate with tilted views")
     lo, hi = lim["aspect"]
     if not lo <= fx / fy <= hi:
-        out.append(f"fx / fy = {fx / fy:.2f} (a camera with square pixels has about 1; plausible {lo:g}-{hi:g})")
+        doubt("aspect", f"fx / fy = {fx / fy:.2f} (a camera with square pixels has about 1; plausible {lo:g}-{hi:g})",
+              "recalibrate with views tilted both left/right and up/down")
     off = max(abs(cx - (w - 1) / 2.0) / w, abs(cy - (h - 1) / 2.0) / h)
     if off > lim["max_centre_offset"]:
-        out.append(f"the principal point ({cx:.1f}, {cy:.1f}) lies {100 * off:.0f}% of the image from its centre "
-                   f"(at most {100 * lim['max_centre_offset']:.0f}%)")
+        doubt("principal_point",
+              f"the principal point ({cx:.1f}, {cy:.1f}) lies {100 * off:.0f}% of the image from its centre "
+              f"(at most {100 * lim['max_centre_offset']:.0f}%)", "add views with the board near the image corners")
     rel = max(result.std.get("fx", 0.0) / fx, result.std.get("fy", 0.0) / fy)
     if not rel <= lim["max_relative_focal_std"]:
-        out.append(f"the focal length is determined only to +-{100 * rel:.1f}% (at most "
-                   f"{100 * lim['max_relative_focal_std']:g}%): add views with the board tilted and near the "
-                   "image corners")
+        doubt("focal_std",
+              f"the focal length is determined only to +-{100 * rel:.1f}% (at most "
+              f"{100 * lim['max_relative_focal_std']:g}%)", "add views with the board tilted and near the image "
+              "corners")
     return out

@@ -59,12 +59,33 @@ RELEASE_MARKER = ".dtscal-release"
 RELEASE_TREES = ("dtscal_lib", "data")
 RELEASE_FILES = ("pyproject.toml", "LICENSE")
 #: the hand-out's own README and one-command start (written by :func:`release`)
+#: kit files the hand-out carries as they are (notebook 06 and the robot's error messages name the first)
+RELEASE_EXTRA = ("scripts/install-ros.sh", "docs/ta.md")
+#: the hand-out is a git repository a GitHub Classroom push carries whole: the student's workspace
+#: (with workspace/.course/, which the next update needs) is in it, backups and the environment are not
+HANDOUT_GITIGNORE = """.venv/
+*.egg-info/
+__pycache__/
+.ipynb_checkpoints/
+workspace/backups/
+workspace/.update.lock
+workspace/.*.tmp
+handin/
+"""
 STUDENT_README = """# Camera calibration for Duckietown: the course
 
-Five JupyterLab notebooks in which you write the pieces of camera calibration yourself: pinhole
-projection, the homography, Zhang's intrinsic calibration, lens distortion and rectification, and the
-ground homography of the Duckiebot's extrinsic calibration. A recorded Duckiebot camera session is
-included, so no robot is needed.
+Six JupyterLab notebooks in which you write the pieces of camera calibration yourself and then
+calibrate a Duckiebot's camera with them. A recorded Duckiebot camera session is included, so no robot
+is needed until the last notebook, and not even there.
+
+| notebook | what you write |
+| --- | --- |
+| `01_pinhole_projection.ipynb` | the pinhole camera: from a 3-D point to a pixel |
+| `02_homography.ipynb` | homographies: a flat board in one 3x3 matrix |
+| `03_intrinsic_calibration.ipynb` | intrinsic calibration: Zhang's method by hand |
+| `04_distortion_rectification.ipynb` | lens distortion and rectification |
+| `05_extrinsic_calibration.ipynb` | extrinsic calibration: from pixels to the ground |
+| `06_duckiebot_camera.ipynb` | the Duckiebot camera: live calibration in JupyterLab (a robot, or the recording) |
 
 ## Start
 
@@ -74,9 +95,10 @@ On a machine with Python 3.11 or newer:
 bash start.sh
 ```
 
-The first run makes a Python environment in `.venv/` and installs the course into it (a few minutes);
-then JupyterLab opens at notebook 01. Later runs start in seconds. Options: `bash start.sh --no-browser`
-prints the address to open instead; `--port 8890` picks another port.
+The first run makes a Python environment in `.venv/` and installs the course into it (a few minutes;
+it prints each step and pip shows each package); then JupyterLab opens at notebook 01. Later runs start
+in seconds. Options: `bash start.sh --no-browser` prints the address to open instead; `--port 8890`
+picks another port.
 
 ## Where you work
 
@@ -86,17 +108,46 @@ go in order: each notebook checks your functions as you go, and until a function
 notebook uses the kit's stand-in and says so, so every notebook runs to the end.
 
 Write your code between the `### BEGIN YOUR CODE` and `### END YOUR CODE` lines and keep those lines.
+Add your own notes and scratch cells wherever you like: they are yours and stay where you put them.
+
+## Handing in
+
+Your instructor says which of the two:
+
+* **A file** (Gradescope or an upload): run `bash start.sh --handin`. It writes `handin/NAME.zip` with
+  your six workspace notebooks (NAME is your git name or login; `bash start.sh --handin --name "Ada
+  Lovelace"` sets it). Upload that zip as it is.
+* **GitHub Classroom**: this folder is a git repository and your work in `workspace/` is part of it.
+  Commit and push: `git add -A && git commit -m "hand in" && git push`. (Backups and `.venv/` are left
+  out by `.gitignore`.)
 
 ## A new version of the course
 
 If your instructor hands out a corrected course, unpack it into a new folder, copy your old
-`workspace/` folder into it, and run `bash start.sh --update`: your code is carried into the new
-notebooks, your old notebooks are kept in `workspace/backups/`, and anything that could not be carried
-over is listed.
+`workspace/` folder into it, and run `bash start.sh --update`. Every notebook is updated cell by cell:
+the course's corrections arrive, and your code, your own cells and the outputs of unchanged cells stay.
+Code that has no place in the new notebooks (a function you renamed, say) is kept in a cell marked
+`KEPT BY THE UPDATE`; your previous notebooks are kept in `workspace/backups/`. If the update cannot
+finish (a full disk, a read-only notebook), it says what to do and changes nothing.
+
+## The robot (notebook 06)
+
+Notebook 06 runs on the recording without a robot. To calibrate a real Duckiebot you need ROS 1 on this
+computer (Debian or Ubuntu) and the robot on the same network:
+
+```bash
+sudo bash scripts/install-ros.sh
+export ROS_MASTER_URI=http://ROBOT.local:11311      # your robot's name, e.g. autobot01
+export ROS_IP=$(hostname -I | awk '{print $1}')     # this computer's address on the robot's network
+bash start.sh
+```
+
+and use `ros:ROBOT` as the source in notebook 06. If the robot does not answer, the status line says
+why and what to do. On macOS or Windows, and for everything a TA sets up, see `docs/ta.md`.
 """
 START_SH = """#!/usr/bin/env bash
 # Start the course: make .venv on the first run, install the course into it, open JupyterLab at notebook 01.
-# Options go to `dtscal course`, e.g. --no-browser, --port 8890, --update.
+# Options go to `dtscal course`, e.g. --no-browser, --port 8890, --update; --handin writes handin/NAME.zip.
 set -euo pipefail
 cd "$(dirname "$0")"
 PYTHON="${PYTHON:-python3}"
@@ -104,14 +155,21 @@ if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null
   echo "start.sh: needs Python 3.11 or newer; install it, or run: PYTHON=/path/to/python3.11 bash start.sh" >&2
   exit 2
 fi
-if [ ! -x .venv/bin/python ]; then
-  echo "making the course's Python environment in .venv (first run only)" >&2
-  "$PYTHON" -m venv .venv
-fi
 if ! .venv/bin/python -c 'import dtscal_lib, jupyterlab' 2>/dev/null; then
-  echo "installing the course into .venv (first run only; a few minutes)" >&2
-  .venv/bin/python -m pip install --quiet --upgrade pip
-  .venv/bin/python -m pip install --quiet -e .
+  echo "start.sh: first run: installing the course into .venv (a few minutes; 3 steps)" >&2
+  if [ ! -x .venv/bin/python ]; then
+    echo "start.sh: [1/3] making the course's Python environment in .venv" >&2
+    "$PYTHON" -m venv .venv
+  fi
+  echo "start.sh: [2/3] updating pip" >&2
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
+  echo "start.sh: [3/3] installing the course, JupyterLab and OpenCV (pip lists each package)" >&2
+  .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on -e .
+  echo "start.sh: installed; starting the course" >&2
+fi
+if [ "${1:-}" = "--handin" ]; then
+  shift
+  exec .venv/bin/dtscal handin "$@"
 fi
 exec .venv/bin/dtscal course "$@"
 """
@@ -422,7 +480,9 @@ def release(out_dir, repo_root=None) -> Path:
     ``notebooks/`` (generated from ``solutions/``, never copied), ``dtscal_lib/`` and
     ``data/`` without grading-only folders (:data:`EXCLUDED_DIRS`) and caches,
     ``pyproject.toml`` (and ``LICENSE`` when present), the students' ``README.md`` and
-    ``start.sh`` (:data:`STUDENT_README`, :data:`START_SH`). It holds no ``solutions/``, no
+    ``start.sh`` (:data:`STUDENT_README`, :data:`START_SH`), the files of :data:`RELEASE_EXTRA`
+    (``scripts/install-ros.sh``, the TA page ``docs/ta.md``) and a ``.gitignore`` that keeps the
+    student's ``workspace/`` in git (:data:`HANDOUT_GITIGNORE`). It holds no ``solutions/``, no
     ``grading/``, no ``tests/`` and no benchmarks. A folder written by an earlier release is replaced.
     After writing, the release is scanned for solution code (:func:`find_solution_leaks`).
 
@@ -459,7 +519,11 @@ def release(out_dir, repo_root=None) -> Path:
     (out / "README.md").write_text(STUDENT_README, encoding="utf-8")
     (out / "start.sh").write_text(START_SH, encoding="utf-8")
     (out / "start.sh").chmod(0o755)
-    (out / ".gitignore").write_text(".venv/\nworkspace/\n*.egg-info/\n", encoding="utf-8")
+    (out / ".gitignore").write_text(HANDOUT_GITIGNORE, encoding="utf-8")
+    for f in RELEASE_EXTRA:
+        if (root / f).is_file():
+            (out / f).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(root / f, out / f)
     (out / RELEASE_MARKER).write_text("written by `dtscal release`; safe to delete and regenerate\n")
     leaks = find_solution_leaks(out, sources)
     if leaks:
@@ -651,18 +715,45 @@ def inject_solutions(student_nb: NotebookNode, solution_nb: NotebookNode) -> Not
 
 
 # --------------------------------------------------------------------------- maintaining solutions
-def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, timeout: int = 300) -> list[Path]:
+#: the output of a displayed widget: a random model id per run, and no use without the live kernel
+WIDGET_VIEW = "application/vnd.jupyter.widget-view+json"
+
+
+def strip_widget_outputs(nb: NotebookNode) -> int:
+    """Drop widget views (random ``model_id``) from stored outputs, keeping their text; returns how many.
+
+    nbval does not compare widget views, and the widget state is not stored, so a view is only a
+    model id that changes on every run (noise in every diff). The output's ``text/plain`` stays.
+    """
+    n = 0
+    nb.metadata.pop("widgets", None)  # widget state is rebuilt when the notebook is opened
+    for cell in nb.cells:
+        for out in cell.get("outputs", []) if cell.cell_type == "code" else []:
+            data = out.get("data")
+            if data and WIDGET_VIEW in data:
+                del data[WIDGET_VIEW]
+                n += 1
+                if not data:
+                    data["text/plain"] = "a widget (shown when the notebook runs in JupyterLab)"
+    return n
+
+
+def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, timeout: int = 300,
+                      progress: bool = False) -> list[Path]:
     """Run solution notebooks top to bottom and store their outputs (what nbval compares).
 
     Each notebook runs in its own folder, as JupyterLab and nbval run it. Per-cell execution
-    timestamps are dropped so that re-running an unchanged notebook leaves the file unchanged
-    wherever the outputs are deterministic.
+    timestamps and widget views (:func:`strip_widget_outputs`) are dropped so that re-running an
+    unchanged notebook leaves the file unchanged wherever the outputs are deterministic.
 
     Parameters
     ----------
     solutions_dir : folder of solution notebooks
     names : optional file names (``02_homography.ipynb``) to run; default all
+    progress : a line per notebook and a bar of its code cells on stderr
     """
+    import sys
+
     from nbclient import NotebookClient
 
     paths = _solution_paths(Path(solutions_dir))
@@ -672,15 +763,29 @@ def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, time
         if unknown:
             raise DtscalError(f"no solution notebook named {', '.join(sorted(unknown))} in {solutions_dir}")
         paths = [p for p in paths if p.name in wanted]
-    for path in paths:
+    for k, path in enumerate(paths, 1):
         nb = _read(path)
-        nb.metadata.pop("widgets", None)  # widget state is rebuilt when the notebook is opened
+        nb.metadata.pop("widgets", None)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            print(f"executing {path.name} ({k}/{len(paths)})", file=sys.stderr, flush=True)
+            bar = tqdm(total=sum(c.cell_type == "code" for c in nb.cells), desc=path.stem, unit="cell",
+                       file=sys.stderr, leave=False, disable=None)
+        client = NotebookClient(nb, timeout=timeout, kernel_name="python3", store_widget_state=False,
+                                resources={"metadata": {"path": str(path.parent)}})
+        if bar is not None:
+            client.on_cell_executed = lambda **_kw: bar.update(1)
         try:
-            NotebookClient(nb, timeout=timeout, kernel_name="python3", store_widget_state=False,
-                           resources={"metadata": {"path": str(path.parent)}}).execute()
+            client.execute()
         except Exception as exc:
             raise DtscalError(f"{path.name} failed while executing; fix the notebook and run again: {exc}") from exc
+        finally:
+            if bar is not None:
+                bar.close()
         for cell in nb.cells:
             cell.metadata.pop("execution", None)
+        strip_widget_outputs(nb)
         path.write_text(_writes(nb))
     return paths

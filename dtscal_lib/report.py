@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from .course.figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
+from .figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
 
 from .errors import DtscalError
 from .quality import REGION_NAMES, Quality, assess
@@ -246,6 +246,8 @@ def write_report(result, directory, quality: Quality | None = None, *, title: st
             "-" if q.uncertainty is None else "the lens model cannot be inverted there"
             if np.isnan(q.uncertainty.corner_mean) else f"{q.uncertainty.corner_mean:.3f} px (1 sigma)",
         "more data would help most": html.escape(q.help_region),
+        "+- (1 sigma) computed as": getattr(result, "std_method", "") or "-",
+        "what it means for a Duckiebot": q.meaning(),  # verdict, why, ground projection at 30 and 60 cm
     })
     colour = _VERDICT_COLOUR[q.verdict]
     findings = "".join(

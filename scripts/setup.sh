@@ -21,11 +21,20 @@ if [ ! -x .venv/bin/python ]; then
   echo "creating .venv with $($py --version)" >&2
   "$py" -m venv .venv
 fi
+# pip lists every package on a first install (minutes); later runs only check, quietly
+QUIET=""
+if .venv/bin/python -c 'import dtscal_lib' 2>/dev/null; then QUIET="--quiet"; fi
+echo "setup: updating pip" >&2
 .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
 if [ "${1:-}" = "--test" ]; then
-  .venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[test]"
+  echo "setup: installing the kit and its test tools into .venv (pip lists each package)" >&2
+  .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on $QUIET -e ".[test]"
+  echo "setup: ROS 1 tools" >&2
   bash scripts/install-ros.sh
+  echo "setup: the browser for the UI tests" >&2
   bash scripts/install-browser.sh
 else
-  .venv/bin/python -m pip install --quiet --disable-pip-version-check -e .
+  echo "setup: installing the kit into .venv (pip lists each package)" >&2
+  .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on $QUIET -e .
 fi
+echo "setup: done" >&2

@@ -27,7 +27,7 @@ from dtscal_lib.calib_files import (
     write_defaults,
 )
 from dtscal_lib.camera import CameraModel
-from dtscal_lib.errors import CalibrationFileError
+from dtscal_lib.errors import CalibrationFileError, CalibrationFileWarning
 
 from unprivileged import run_unprivileged, shared_tmp
 
@@ -331,13 +331,26 @@ def test_R_must_be_rotation(tmp_path):
 
 
 @pytest.mark.parametrize("index,value,pattern", [(10, 0.5, r"third row is \[0\.0, 0\.0, 0\.5"),
-                                                 (11, 1, "expected \\[0, 0, 1, 0\\]"),
+                                                 (8, 0.1, "expected \\[0, 0, 1, 0\\]"),
                                                  (0, -210.0, "fx' = -210")])
 def test_P_form(tmp_path, index, value, pattern):
     doc = _default_doc()
     doc["projection_matrix"]["data"][index] = value
     with pytest.raises(CalibrationFileError, match=pattern):
         load_intrinsics(_write_intrinsic_doc(tmp_path, doc))
+
+
+def test_P_third_row_translation_is_read_as_duckietown_reads_it(tmp_path):
+    """Duckietown's DD24 calibration YAML has P's third row [0, 0, 1, 1]; its loader uses only P's left 3x3."""
+    doc = _default_doc()
+    doc["projection_matrix"]["data"][11] = 1
+    path = _write_intrinsic_doc(tmp_path, doc)
+    pattern = r"third row is \[0\.0, 0\.0, 1\.0, 1\.0\].*read as \[0, 0, 1, 0\]"
+    with pytest.warns(CalibrationFileWarning, match=pattern) as w:
+        calib = load_intrinsics(path)
+    assert len(w) == 1 and str(path) in str(w[0].message)
+    np.testing.assert_array_equal(calib.P, dt.default_P())
+    np.testing.assert_array_equal(calib.K, dt.default_K())
 
 
 def test_direct_construction_validates():
@@ -374,15 +387,18 @@ def test_bad_extrinsics(tmp_path, text, pattern):
     assert str(p) in str(e.value)
 
 
-def test_corrupt_homography_explains_rule(tmp_path):
+def test_positive_h12_is_read_with_a_warning_and_refused_when_writing(tmp_path):
+    """Duckietown's H[1][2] rule applies when writing; its reader (and the kit's) takes such files."""
     H = list(dt.DEFAULT_HOMOGRAPHY)
     H[5] = 0.3280241
     p = _write_ext(tmp_path, yaml.safe_dump({"homography": H}, default_flow_style=None))
+    with pytest.warns(CalibrationFileWarning, match=r"H\[1\]\[2\] = 0.328024 > 0.*rotated 180 degrees") as w:
+        got = load_extrinsics(p)
+    assert len(w) == 1 and str(p) in str(w[0].message)
+    np.testing.assert_array_equal(got.ravel(), H)
     with pytest.raises(CalibrationFileError, match=r"H\[1\]\[2\] = 0.328024 > 0.*corrupt") as e:
-        load_extrinsics(p)
-    assert "recalibrate" in str(e.value)
-    with pytest.raises(CalibrationFileError, match="corrupt"):
         save_extrinsics(np.array(H).reshape(3, 3), tmp_path, "bot")
+    assert "recalibrate" in str(e.value)
     assert yaml.safe_load(p.read_text())["homography"][5] == 0.3280241
 
 

@@ -190,13 +190,14 @@ def test_matches_opencv_and_its_std():
         assert abs(ours.rms - rms) < 1e-6
         np.testing.assert_allclose(ours.per_view_rms, per_view.ravel(), atol=1e-5)
         std_cv = dict(zip(["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"], std_int.ravel()[:9]))
-        assert set(ours.std) == {"fx", "fy", "cx", "cy", *dnames}
-        for k, v in ours.std.items():
+        assert set(ours.std) == set(ours.std_noise_model) == {"fx", "fy", "cx", "cy", *dnames}
+        for k, v in ours.std_noise_model.items():  # OpenCV's is the noise model's
             assert v == pytest.approx(std_cv[k], rel=2e-3), (model, k)
+            assert ours.std[k] >= v * (1 - 1e-9), (model, k)  # the reported one is never smaller
 
 
 def test_std_matches_dense_covariance():
-    """The Schur-complement std equals the brute-force dense sigma^2 (J^T J)^-1 (with skew)."""
+    """The Schur-complement noise-model std equals the brute-force dense sigma^2 (J^T J)^-1 (with skew)."""
     K = K_with(s=1.5)
     _, _, img = synth_views(K, dt.default_dist(), 6, seed=11, noise=0.3)
     res = calibrate([OBJ] * 6, img, SIZE, skew=True)
@@ -215,7 +216,7 @@ def test_std_matches_dense_covariance():
     sigma2 = e @ e / (len(e) - J.shape[1])
     std = np.sqrt(np.diag(sigma2 * np.linalg.inv(J.T @ J))[:n_i])
     names = ["fx", "fy", "cx", "cy", "skew", "k1", "k2", "p1", "p2"]
-    np.testing.assert_allclose([res.std[k] for k in names], std, rtol=1e-8)
+    np.testing.assert_allclose([res.std_noise_model[k] for k in names], std, rtol=1e-8)
     assert res.sigma**2 == pytest.approx(sigma2, rel=1e-10)
 
 

@@ -396,10 +396,20 @@ def test_live_detector_bounds_the_classic_search_on_boards_cut_by_the_edge(monke
         return real(img, size, flags=flags)
 
     monkeypatch.setattr(detect.cv2, "findChessboardCorners", spy)
+    at_border = 0
     for index in sorted(cut):
         calls.clear()
-        assert not detect_board(frames[index]).found
+        live = detect_board(frames[index])
+        assert not live.found
         assert len(calls) <= 1 and sum(h * w for h, w in calls) <= 16_000, (index, calls)
         calls.clear()
         detect_board_still(frames[index])
-        assert len(calls) >= 2, (index, calls)
+        if live.reason == detect.REASON_AT_BORDER:
+            # the saddle lattice saw the whole board, too close to the edge: that is the answer (ROS's
+            # border rule), the stills path has nothing more to search (frame 259: its corners reach
+            # within 8 px of the edge)
+            at_border += 1
+            assert calls == [], (index, calls)
+        else:
+            assert len(calls) >= 2, (index, calls)
+    assert at_border <= 2  # the others are cut by the edge: only the thorough search can tell

@@ -3,6 +3,7 @@ the loader (only imports and defs run) and the academic-honesty rule."""
 
 from __future__ import annotations
 
+import csv
 import json
 import re
 import textwrap
@@ -202,11 +203,12 @@ def test_cli_writes_gradescope_json_and_csv(tmp_path, capsys):
     assert 10 <= data["ada"]["score"] < 20 and data["bo"]["score"] == 0
     for t in data["ada"]["tests"]:
         assert set(t) == {"name", "score", "max_score", "output", "visibility"}
-    rows = out_csv.read_text().splitlines()
-    assert rows[0] == "student,project_points,board_ground_points,pixel_to_ground,total,max"
-    ada, bo = rows[1].split(","), rows[2].split(",")
+    rows = list(csv.reader(out_csv.read_text().splitlines()))
+    assert rows[0] == ["student", "project_points", "board_ground_points", "pixel_to_ground", "total", "max", "notes"]
+    ada, bo = rows[1], rows[2]
     assert ada[0] == "ada" and ada[1] == "10" and float(ada[2]) < 10 and ada[3] == "0" and ada[5] == "30"
-    assert bo == ["bo", "0", "", "", "0", "10"]
+    # the same maximum for everyone; what was not handed in is 0, and says so
+    assert bo[:6] == ["bo", "0", "0", "0", "0", "30"] and "05_extrinsic_calibration: not handed in" in bo[6]
 
 
 def test_cli_single_notebook_table(tmp_path, capsys):

@@ -228,10 +228,25 @@ def test_homography_through_the_wrong_intrinsics():
     assert any("not a view of a flat ground" in d for d in doubts), doubts
 
 
-def test_duckietown_h12_rule():
+def test_h12_sign_flipped_is_not_a_view_of_the_ground():
     H = _ground_H()
     H[1, 2] = abs(H[1, 2])
-    assert any("H[1][2]" in d for d in ground_homography_doubts(H, dt.default_K()))
+    codes = {d.code for d in ground_homography_doubts(H, dt.default_K())}
+    assert "not_a_plane_view" in codes, codes
+
+
+@pytest.mark.parametrize("height, pitch", [(0.10, 16.0), (0.11, 24.0)])
+def test_upside_down_camera_of_the_fleet_is_believed(height, pitch):
+    """The fleet's H[1][2] > 0 files: the image rotated 180 degrees and the corners ordered by their image
+    position, so the ground comes out turned about the board's centre; a self-consistent camera."""
+    from dtscal_lib.boards import ground_points
+    R180 = np.array([[-1.0, 0, 639], [0, -1, 479], [0, 0, 1]])
+    xc = ground_points(DUCKIETOWN_BOARD)[:, 0].mean()
+    T = np.array([[-1.0, 0, 2 * xc], [0, -1, 0], [0, 0, 1]])
+    H = T @ _ground_H(height, pitch) @ np.linalg.inv(R180)
+    H /= H[2, 2]
+    assert H[1, 2] > 0 and dt.homography_is_corrupt(H)
+    assert ground_homography_doubts(H, dt.default_K()) == []
 
 
 def test_session_extrinsics_pose_matches_truth(tmp_path):

@@ -238,3 +238,26 @@ def test_release_refuses_unsafe_folders_and_replaces_its_own(tmp_path):
     (out / "leftover.txt").write_text("x")
     rel.release(out, repo_root=root)
     assert not (out / "leftover.txt").exists()
+
+
+def test_stored_solutions_hold_no_widget_view():
+    """A widget view is a random model id per run: stored outputs keep only its text (nbval skips the view)."""
+    for p in sorted(SOLUTIONS.glob("*.ipynb")):
+        assert rel.WIDGET_VIEW not in p.read_text(), f"{p.name}: run `dtscal release --execute` (it strips them)"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_execute_twice_changes_no_stored_output(tmp_path, capsys):
+    """`release --execute` of notebook 01 (it shows a widget) twice in a row: byte-identical, with progress."""
+    import shutil
+
+    sol = tmp_path / "solutions"
+    sol.mkdir()
+    shutil.copyfile(SOLUTIONS / "01_pinhole_projection.ipynb", sol / "01_pinhole_projection.ipynb")
+    rel.execute_solutions(sol, progress=True)
+    first = (sol / "01_pinhole_projection.ipynb").read_text()
+    assert "executing 01_pinhole_projection.ipynb (1/1)" in capsys.readouterr().err
+    rel.execute_solutions(sol)
+    assert (sol / "01_pinhole_projection.ipynb").read_text() == first
+    assert rel.WIDGET_VIEW not in first and "pinhole explorer" in first

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
 import nbformat
+import pytest
 
 from dtscal_lib import release as rel
 from dtscal_lib.course import workspace as ws
+from dtscal_lib.errors import DtscalError
 from nbtools import ROOT
 
 STUDENT_CODE = [
@@ -96,7 +99,7 @@ def test_update_reports_code_it_cannot_carry(tmp_path):
     report = ws.update_workspace(root, stamp="t2")
     assert not report.ok
     text = report.text()
-    assert "COULD NOT CARRY OVER" in text and "02_homography.ipynb" in text and "backups" in text
+    assert "KEPT IN A MARKED CELL" in text and "02_homography.ipynb" in text and "backups" in text
     assert (wsdir / "backups" / "t2" / "02_homography.ipynb").exists()
 
 
@@ -113,3 +116,322 @@ def test_course_command_roots_students_in_the_workspace_and_opens_notebook_01(tm
     assert "--LabApp.default_url=/lab/tree/01_pinhole_projection.ipynb" in cmd
     cmd = ws.jupyter_command(root, instructor=True)
     assert f"--ServerApp.root_dir={root / 'solutions'}" in cmd
+
+
+# --------------------------------------------------------------------------- the whole notebook survives an update
+MY_NOTES = "My notes: K maps camera coordinates to pixels."
+MY_SCRATCH = "scratch = project_points(np.eye(3), np.eye(3), np.zeros(3), np.array([[1.0, 2.0, 4.0]]))"
+RENAMED = ["    return np.asarray(pts, float) * 0 + 42  # my renamed version"]
+
+
+def _student_works(wsdir: Path) -> None:
+    """A student's afternoon: code, a note, a scratch cell with its output, an output kept, a renamed function."""
+    p1 = wsdir / "01_pinhole_projection.ipynb"
+    _write_student_code(p1, "project_points", STUDENT_CODE)
+    nb = nbformat.read(str(p1), as_version=4)
+    ex = next(i for i, c in enumerate(nb.cells) if "def project_points(" in c.source)
+    scratch = nbformat.v4.new_code_cell(MY_SCRATCH)
+    scratch.outputs = [nbformat.v4.new_output("stream", name="stdout", text="my scratch output\n")]
+    nb.cells.insert(ex + 1, scratch)
+    nb.cells.insert(1, nbformat.v4.new_markdown_cell(MY_NOTES))
+    demo = next(c for c in nb.cells if c.cell_type == "code" and c.get("id") == "nb01-04")
+    demo.outputs = [nbformat.v4.new_output("stream", name="stdout", text="course cell output\n")]
+    demo.execution_count = 3
+    nbformat.write(nb, str(p1))
+    p2 = wsdir / "02_homography.ipynb"
+    _write_student_code(p2, "apply_homography", RENAMED)
+    nb = nbformat.read(str(p2), as_version=4)
+    for c in nb.cells:
+        c.source = c.source.replace("def apply_homography(", "def apply_h(")
+    nbformat.write(nb, str(p2))
+
+
+def _instructor_corrects(root: Path) -> None:
+    sol = root / "solutions" / "01_pinhole_projection.ipynb"
+    nb = nbformat.read(str(sol), as_version=4)
+    for cell in nb.cells:
+        if "def project_points(" in cell.source:
+            cell.source = cell.source.replace("Project world points into pixels",
+                                              "Project world points (metres) into pixels")
+    nb.cells.insert(1, nbformat.v4.new_markdown_cell("A correction from your instructor."))
+    nbformat.write(nb, str(sol))
+    rel.generate_notebooks(root / "solutions", root / "notebooks")
+
+
+def _assert_nothing_lost(wsdir: Path) -> None:
+    nb = nbformat.read(str(wsdir / "01_pinhole_projection.ipynb"), as_version=4)
+    src = [c.source for c in nb.cells]
+    assert src.count(MY_NOTES) == 1 and src.count(MY_SCRATCH) == 1  # once, however many updates ran
+    notes = src.index(MY_NOTES)
+    assert nb.cells[notes - 1].get("id") == "nb01-00"  # where the student put it: after the title cell
+    ex = next(i for i, c in enumerate(nb.cells) if "def project_points(" in c.source)
+    assert "\n".join(STUDENT_CODE) in nb.cells[ex].source
+    assert nb.cells[ex + 1].source == MY_SCRATCH and "my scratch output" in nb.cells[ex + 1].outputs[0]["text"]
+    demo = next(c for c in nb.cells if c.get("id") == "nb01-04")
+    assert demo.outputs and "course cell output" in demo.outputs[0]["text"] and demo.execution_count == 3
+    nb2 = nbformat.read(str(wsdir / "02_homography.ipynb"), as_version=4)
+    kept = [c for c in nb2.cells if ws.KEPT_TAG in c.metadata.get("tags", [])]
+    assert len(kept) == 1 and kept[0].cell_type == "raw"
+    assert "def apply_h(" in kept[0].source and RENAMED[0] in kept[0].source
+    assert kept[0].source.startswith("# KEPT BY THE UPDATE: your code for `apply_h` has no place")
+
+
+def test_update_keeps_own_cells_outputs_and_a_renamed_function(tmp_path):
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _student_works(wsdir)
+    _instructor_corrects(root)
+    report = ws.update_workspace(root, stamp="t3")
+    assert not report.ok  # the renamed function needs the student's attention: never a silent "ok"
+    assert "apply_h" in report.text() and "KEPT IN A MARKED CELL" in report.text()
+    assert report.carried["01_pinhole_projection.ipynb"] == ["project_points"]
+    assert report.own_cells["01_pinhole_projection.ipynb"] == 2
+    _assert_nothing_lost(wsdir)
+    nb = nbformat.read(str(wsdir / "01_pinhole_projection.ipynb"), as_version=4)
+    assert "A correction from your instructor." in [c.source for c in nb.cells]
+    assert "Project world points (metres) into pixels" in _cell_of(wsdir / "01_pinhole_projection.ipynb",
+                                                                   "project_points")
+    # a second update (nothing new in the course) changes nothing of the student's and duplicates nothing
+    ws.update_workspace(root, stamp="t4")
+    _assert_nothing_lost(wsdir)
+
+
+def test_update_keeps_a_course_cell_the_student_edited(tmp_path):
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    p1 = wsdir / "01_pinhole_projection.ipynb"
+    nb = nbformat.read(str(p1), as_version=4)
+    demo = next(c for c in nb.cells if c.get("id") == "nb01-04")
+    demo.source += "\nprint('my tweak')"
+    nbformat.write(nb, str(p1))
+    _instructor_corrects(root)  # the course does not change nb01-04: the student's edit stays in place
+    ws.update_workspace(root, stamp="t5")
+    nb = nbformat.read(str(p1), as_version=4)
+    assert next(c for c in nb.cells if c.get("id") == "nb01-04").source.endswith("print('my tweak')")
+    # the course changes that cell too: the new version, and the student's just below it, marked
+    sol = root / "solutions" / "01_pinhole_projection.ipynb"
+    snb = nbformat.read(str(sol), as_version=4)
+    sdemo = next(c for c in snb.cells if c.get("id") == "nb01-04")
+    sdemo.source = "# corrected by the instructor\n" + sdemo.source
+    nbformat.write(snb, str(sol))
+    rel.generate_notebooks(root / "solutions", root / "notebooks")
+    report = ws.update_workspace(root, stamp="t6")
+    nb = nbformat.read(str(p1), as_version=4)
+    i = next(i for i, c in enumerate(nb.cells) if c.get("id") == "nb01-04")
+    assert nb.cells[i].source.startswith("# corrected by the instructor")
+    assert nb.cells[i + 1].cell_type == "raw" and nb.cells[i + 1].source.endswith("print('my tweak')")
+    assert not report.ok and "course changed it too" in report.text()
+
+
+def test_two_updates_in_one_second_keep_two_backups(tmp_path):
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _student_works(wsdir)
+    first = (wsdir / "01_pinhole_projection.ipynb").read_bytes()
+    ws.update_workspace(root, stamp="same")
+    _instructor_corrects(root)
+    second = (wsdir / "01_pinhole_projection.ipynb").read_bytes()
+    ws.update_workspace(root, stamp="same")
+    assert (wsdir / "backups" / "same" / "01_pinhole_projection.ipynb").read_bytes() == first
+    assert (wsdir / "backups" / "same-2" / "01_pinhole_projection.ipynb").read_bytes() == second
+    _assert_nothing_lost(wsdir)
+
+
+def _update_in_child(root: str, conn) -> None:
+    try:
+        conn.send(("ok", ws.update_workspace(root, stamp="double-click").text()))
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent
+        conn.send((type(exc).__name__, str(exc)))
+
+
+def test_two_updates_at_once_both_finish_and_lose_nothing(tmp_path):
+    import multiprocessing
+
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _student_works(wsdir)
+    _instructor_corrects(root)
+    ctx = multiprocessing.get_context("fork")
+    pipes, procs = [], []
+    for _ in range(2):  # a double click: two updates started together; the lock makes the second wait
+        a, b = ctx.Pipe()
+        p = ctx.Process(target=_update_in_child, args=(str(root), b))
+        pipes.append(a)
+        procs.append(p)
+    for p in procs:
+        p.start()
+    answers = [a.recv() if a.poll(120) else ("no answer", "") for a in pipes]
+    for p in procs:
+        p.join(60)
+    assert [kind for kind, _ in answers] == ["ok", "ok"], answers
+    assert sorted(d.name for d in (wsdir / "backups").iterdir()) == ["double-click", "double-click-2"]
+    _assert_nothing_lost(wsdir)
+    assert not list(wsdir.glob(".*.tmp")) and not list(wsdir.glob(".*.old-*"))
+
+
+def test_an_update_while_another_holds_the_lock_refuses_and_changes_nothing(tmp_path):
+    import fcntl
+
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _student_works(wsdir)
+    _instructor_corrects(root)
+    before = {p.name: p.read_bytes() for p in wsdir.glob("*.ipynb")}
+    fd = os.open(wsdir / ws.LOCK, os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        with pytest.raises(DtscalError, match="another update of this workspace is still running"):
+            ws.update_workspace(root, lock_wait_s=0.5)
+    finally:
+        os.close(fd)
+    assert {p.name: p.read_bytes() for p in wsdir.glob("*.ipynb")} == before
+    assert not (wsdir / "backups").exists()
+    ws.update_workspace(root)  # the lock is free again
+    _assert_nothing_lost(wsdir)
+
+
+def _cli_update(root: Path) -> tuple[int, str]:
+    """``dtscal course --update`` on ``root`` as the command line runs it (exit code, stderr)."""
+    import contextlib
+    import io
+    from unittest import mock
+
+    from dtscal_lib import cli
+
+    err = io.StringIO()
+    with mock.patch("dtscal_lib.paths.repo_root", return_value=root), contextlib.redirect_stderr(err), \
+            contextlib.redirect_stdout(io.StringIO()):
+        code = cli.main(["course", "--update"])
+    return code, err.getvalue()
+
+
+def _snapshot(wsdir: Path) -> dict:
+    return {str(p.relative_to(wsdir)): p.read_bytes() for p in sorted(wsdir.rglob("*")) if p.is_file()
+            and p.name != ws.LOCK}
+
+
+def test_update_with_backups_a_file_says_what_to_do(tmp_path):
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _student_works(wsdir)
+    _instructor_corrects(root)
+    (wsdir / "backups").write_text("not a folder")
+    before = _snapshot(wsdir)
+    code, err = _cli_update(root)
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "backups is a file, not a folder; rename or delete it" in err and "nothing was changed" in err
+    assert _snapshot(wsdir) == before
+
+
+def _update_as_unprivileged(root: str) -> str:
+    try:
+        ws.update_workspace(root)
+    except DtscalError as exc:
+        return f"refused: {exc}"
+    return "updated"
+
+
+def test_update_of_a_read_only_notebook_refuses_and_changes_nothing():
+    from unprivileged import run_unprivileged, shared_tmp
+
+    with shared_tmp() as tmp:
+        root = _kit(tmp)
+        wsdir = ws.ensure_workspace(root)
+        _student_works(wsdir)
+        _instructor_corrects(root)
+        if os.geteuid() == 0:  # the child runs as nobody: the workspace is theirs, as a student's is
+            import pwd
+
+            user = pwd.getpwnam("nobody")
+            for p in [wsdir, *wsdir.rglob("*")]:
+                os.chown(p, user.pw_uid, user.pw_gid)
+        (wsdir / "02_homography.ipynb").chmod(0o444)
+        before = _snapshot(wsdir)
+        ok, text = run_unprivileged(_update_as_unprivileged, str(root))
+        assert ok, text
+        assert text.startswith("refused: ") and "02_homography.ipynb is read-only" in text
+        assert "make it writable" in text and "nothing was changed" in text and "\n" not in text
+        assert _snapshot(wsdir) == before
+
+
+def _update_with_a_small_file_limit(root: str, limit: int) -> str:
+    import resource
+    import signal
+
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG, as on a full disk
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return _update_as_unprivileged(root)
+
+
+def test_update_that_cannot_write_a_whole_notebook_changes_nothing(tmp_path):
+    """Writes cut short (a file-size limit: a write past half the largest notebook fails, as on a full disk)."""
+    import multiprocessing
+
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _student_works(wsdir)
+    _instructor_corrects(root)
+    before = _snapshot(wsdir)
+    limit = max(p.stat().st_size for p in wsdir.glob("*.ipynb")) // 2
+    ctx = multiprocessing.get_context("fork")
+    a, b = ctx.Pipe()
+
+    def child(conn):
+        try:
+            conn.send(_update_with_a_small_file_limit(str(root), limit))
+        except BaseException as exc:  # noqa: BLE001 - a traceback is a failure the parent reports
+            conn.send(f"{type(exc).__name__}: {exc}")
+
+    p = ctx.Process(target=child, args=(b,))
+    p.start()
+    assert a.poll(60), "the update in the child neither finished nor failed"
+    text = a.recv()
+    p.join(60)
+    assert text.startswith("refused: ") and "the disk is full" in text and "nothing was changed" in text, text
+    assert _snapshot(wsdir) == before
+    assert not list(wsdir.rglob("*.tmp"))
+    assert not (wsdir / "backups").exists() or not any((wsdir / "backups").iterdir())
+
+
+def test_update_on_a_full_disk_changes_nothing(tmp_path):
+    """A real full file system: a small tmpfs (needs root to mount; the file-size test above covers the rest)."""
+    import subprocess
+
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root; test_update_that_cannot_write_a_whole_notebook_changes_nothing "
+                    "covers a write cut short without it")
+    kit = _kit(tmp_path)
+    used = sum(p.stat().st_size for p in kit.rglob("*") if p.is_file())
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    size_kb = (3 * used + 1_000_000) // 1024  # room for the kit and a workspace; filled up below
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size_kb}k", "tmpfs", str(mnt)]).returncode != 0:
+        from ci import missing
+
+        missing("cannot mount a tmpfs here (a container without CAP_SYS_ADMIN)")
+    try:
+        root = mnt / "kit"
+        shutil.copytree(kit, root)
+        wsdir = ws.ensure_workspace(root)
+        _student_works(wsdir)
+        _instructor_corrects(root)
+        filler = mnt / "filler"
+        with open(filler, "wb", buffering=0) as f:  # fill the disk but for a few kB
+            try:
+                while True:
+                    f.write(b"\0" * 4096)
+            except OSError:
+                pass
+        with open(filler, "r+b") as f:
+            f.truncate(max(0, filler.stat().st_size - 16_384))
+        before = _snapshot(wsdir)
+        code, err = _cli_update(root)
+        assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+        assert "the disk is full: free some space" in err and "nothing was changed" in err
+        assert _snapshot(wsdir) == before
+        filler.unlink()
+        code, err = _cli_update(root)  # space freed: the update goes through, nothing lost
+        assert code in (0, 1), err
+        _assert_nothing_lost(wsdir)
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)])

@@ -11,7 +11,7 @@ this package for plumbing and pictures::
 Modules, each named after the concept it holds:
 
 * :mod:`~dtscal_lib.course.fallback`: the student's function or the kit's stand-in, said once
-* :mod:`~dtscal_lib.course.figure`: pyplot-free figures that show themselves as small PNGs
+* :mod:`~dtscal_lib.course.figure` (:mod:`dtscal_lib.figure`): pyplot-free figures shown as small PNGs
 * :mod:`~dtscal_lib.course.session`: the recorded session through :mod:`dtscal_lib.datasets`
 * :mod:`~dtscal_lib.course.projection`, :mod:`~dtscal_lib.course.homography`,
   :mod:`~dtscal_lib.course.calibration`, :mod:`~dtscal_lib.course.residuals`,

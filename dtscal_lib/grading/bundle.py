@@ -7,7 +7,8 @@ image is built, then ``run_autograder`` for every submission: the student's file
 The zip holds the kit's library, the hidden cases (``grading/``) and the solution notebooks
 (references). ``setup.sh`` installs the library into a virtual environment and makes
 ``grading/`` and ``solutions/`` readable by root only; the sandbox runs student code as
-user ``nobody``. ``run_autograder`` always writes a results file, even if grading fails.
+a fresh uid behind Landlock and namespaces (docs/grading-sandbox.md). ``run_autograder``
+always writes a results file, even if grading fails.
 For a local test, ``DTSCAL_AUTOGRADER_ROOT`` replaces ``/autograder`` and ``DTSCAL_PYTHON``
 the virtual environment's Python.
 """
@@ -21,18 +22,38 @@ from pathlib import Path
 from ..errors import DtscalError
 from .material import find_material
 
+#: the Gradescope base image to choose (its python3 is 3.12); the default Ubuntu 22.04 has 3.10
+BASE_IMAGE = "Ubuntu 24.04"
 SETUP_SH = """#!/usr/bin/env bash
 # Gradescope runs this once, as root, when it builds the autograder image.
+# The kit needs Python 3.11 or newer: choose the base image "Ubuntu 24.04" (python3 is 3.12) in the
+# autograder settings; the default Ubuntu 22.04 has 3.10.
 set -euo pipefail
 SRC="$(cd "$(dirname "$0")" && pwd)"
+AUTOGRADER="${DTSCAL_AUTOGRADER_ROOT:-/autograder}"
 export DEBIAN_FRONTEND=noninteractive
+echo "setup.sh: installing python3 with apt" >&2
 apt-get update -qq
 apt-get install -y -qq python3 python3-venv python3-pip >/dev/null
-python3 -m venv /autograder/venv
-/autograder/venv/bin/pip install --quiet --upgrade pip
-/autograder/venv/bin/pip install --quiet "$SRC"
+PY=""
+for candidate in python3.13 python3.12 python3.11 python3; do
+  if command -v "$candidate" >/dev/null 2>&1 && \\
+     "$candidate" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' 2>/dev/null; then
+    PY="$candidate"; break
+  fi
+done
+if [ -z "$PY" ]; then
+  echo "setup.sh: the calibration kit needs Python 3.11 or newer, but this image has $(python3 --version 2>&1)." \\
+       "In the assignment's Configure Autograder page choose the base image Ubuntu 24.04, then rebuild." >&2
+  exit 1
+fi
+echo "setup.sh: installing the kit with $($PY --version) into $AUTOGRADER/venv" >&2
+"$PY" -m venv "$AUTOGRADER/venv"
+"$AUTOGRADER/venv/bin/pip" install --quiet --upgrade pip
+"$AUTOGRADER/venv/bin/pip" install --progress-bar off "$SRC"
 # the hidden cases and the references: readable by root (the grader) only
 chmod -R go-rwx "$SRC/grading" "$SRC/solutions"
+echo "setup.sh: done" >&2
 """
 
 RUN_AUTOGRADER = """#!/usr/bin/env bash
@@ -42,6 +63,10 @@ PY="${{DTSCAL_PYTHON:-$ROOT/venv/bin/python}}"
 RESULTS="$ROOT/results/results.json"
 mkdir -p "$ROOT/results"
 rm -f "$RESULTS"
+# a `dtscal handin` zip that was not unpacked: its notebooks next to it (Gradescope unpacks uploaded zips itself)
+for z in "$ROOT"/submission/*.zip; do
+  [ -f "$z" ] && "$PY" -m zipfile -e "$z" "$ROOT/submission/" >/dev/null 2>&1
+done
 "$PY" -m dtscal_lib.cli grade "$ROOT/submission" --material "$ROOT/source" --json "$RESULTS" {assignment}-q \\
     > "$ROOT/results/grade.log" 2>&1
 status=$?
@@ -93,6 +118,33 @@ def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> 
                 z.write(root / f, f)
     os.replace(tmp, out)
     return out
+
+
+def unpack_zip_submission(path, into) -> Path:
+    """A submission zip (``dtscal handin``'s ``NAME.zip``) unpacked into ``into/NAME/``; other paths as they are.
+
+    ``dtscal grade NAME.zip`` then grades the folder as the student ``NAME``, as Gradescope, which
+    unpacks an uploaded zip into its submission folder, does. Only notebooks and .py files are
+    taken, each by its base name (no path in the zip can point outside ``into``).
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".zip":
+        return path
+    if not path.is_file():
+        raise DtscalError(f"{path} does not exist: give the hand-in zip, a notebook or a folder")
+    folder = Path(into) / path.stem
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                name = Path(info.filename).name
+                if info.is_dir() or not name.endswith((".ipynb", ".py")) or name.startswith("."):
+                    continue
+                (folder / name).write_bytes(z.read(info))
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise DtscalError(f"{path} is not a readable zip ({exc}); ask the student for `dtscal handin`'s file "
+                          "again") from None
+    return folder
 
 
 def _add_text(z: zipfile.ZipFile, name: str, text: str) -> None:

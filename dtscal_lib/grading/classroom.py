@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import sys
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import DtscalError
 from .grade import GradeResult, grade_file
+from .loader import load_submission
 from .material import ASSIGNMENTS, Material, assignment_of
 
 SUFFIXES = (".ipynb", ".py")
@@ -25,19 +26,55 @@ class Item:
     student: str
     path: Path
     assignment: str
+    note: str = ""
+
+
+@dataclass
+class Roster:
+    """Everyone under a path: what gets graded, every student (also those with nothing to
+    grade), why each other file is not graded, and the class's assignments (the columns:
+    the same maximum for every student)."""
+
+    items: list[Item] = field(default_factory=list)
+    students: list[str] = field(default_factory=list)
+    notes: dict[str, list[str]] = field(default_factory=dict)
+    assignments: list[str] = field(default_factory=list)
+
+    def note(self, student: str, text: str) -> None:
+        self.notes.setdefault(student, []).append(text)
+
+
+#: course notebooks that exist but hold no graded exercise
+UNGRADED = {"06": "notebook 06 (the Duckiebot camera session) is not graded"}
+
+
+def _ungraded(name: str) -> str | None:
+    stem = Path(name).stem.lower()
+    for prefix, why in UNGRADED.items():
+        if stem.startswith(prefix) or "duckiebot_camera" in stem:
+            return why
+    return None
 
 
 def _files(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix in SUFFIXES
+    return sorted(p for p in folder.rglob("*") if p.is_file()
                   and not any(part.startswith(".") or part == "__pycache__" for part in p.relative_to(folder).parts))
 
 
-def _assignment(path: Path, forced: str | None) -> str | None:
-    return forced or assignment_of(path.name)
+def match_by_functions(path: Path) -> str | None:
+    """The assignment whose exercise functions ``path`` defines (most of them), or None."""
+    try:
+        sub = load_submission(path)
+    except Exception:  # noqa: BLE001 - unreadable: the grader says why when it grades it
+        return None
+    counts = {a: sum(f in sub.functions for f in fs) for a, fs in ASSIGNMENTS.items()}
+    best = max(counts.values())
+    hits = [a for a, n in counts.items() if n == best]
+    return hits[0] if best and len(hits) == 1 else None
 
 
-def discover(path, assignment: str | None = None) -> tuple[list[Item], list[str]]:
-    """The submissions under ``path`` and the files that were skipped (with why)."""
+def roster(path, assignment: str | None = None) -> Roster:
+    """Every student and every file under ``path``: graded, or listed with the reason it is not."""
     path = Path(path)
     forced = None
     if assignment:
@@ -46,39 +83,88 @@ def discover(path, assignment: str | None = None) -> tuple[list[Item], list[str]
             raise DtscalError(f"unknown assignment {assignment!r}; use one of {', '.join(ASSIGNMENTS)}")
     if not path.exists():
         raise DtscalError(f"{path} does not exist: give a notebook, a .py file or a folder of submissions")
-    items, skipped = [], []
+    r = Roster()
+    taken: dict[tuple[str, str], Path] = {}
 
-    def add(student, p):
-        a = _assignment(p, forced)
-        if a is None:
-            skipped.append(f"{p}: cannot tell the assignment from the name; pass --assignment")
+    def add(student: str, p: Path, rel: str) -> None:
+        if student not in r.students:
+            r.students.append(student)
+        if p.suffix not in SUFFIXES:
+            r.note(student, f"{rel}: not a notebook (.ipynb) or .py file; not graded")
+            return
+        why = _ungraded(p.name)
+        named = assignment_of(p.name)
+        if why and not named:
+            r.note(student, f"{rel}: not graded: {why}")
+            return
+        note = ""
+        if forced:
+            if named and named != forced:
+                r.note(student, f"{rel}: not graded: its name says notebook {named}, not {forced} (--assignment)")
+                return
+            if not named:
+                m = match_by_functions(p)
+                if m and m != forced:
+                    r.note(student, f"{rel}: not graded as {forced}: it defines the functions of {m}")
+                    return
+            a = forced
+        elif named:
+            a = named
         else:
-            items.append(Item(student, p, a))
+            a = match_by_functions(p)
+            if a is None:
+                r.note(student, f"{rel}: not graded: the name does not say which notebook it is and it defines "
+                                "none of the graded exercise functions (pass --assignment)")
+                return
+            note = f"{rel}: graded as {a}: the name does not say which notebook it is; its functions are {a}'s"
+        if (student, a) in taken:
+            r.note(student, f"{rel}: not graded: {taken[student, a].name} is already graded as {a}")
+            return
+        taken[student, a] = p
+        if note:
+            r.note(student, note)
+        r.items.append(Item(student, p, a, note))
 
     if path.is_file():
         if path.suffix not in SUFFIXES:
             raise DtscalError(f"{path} is not a notebook (.ipynb) or Python file (.py)")
-        add(path.stem, path)
-        return items, skipped
-    subdirs = sorted(d for d in path.iterdir() if d.is_dir() and not d.name.startswith((".", "__")))
-    top = sorted(p for p in path.iterdir() if p.is_file() and p.suffix in SUFFIXES)
-    named = [p for p in top if assignment_of(p.name)]
-    if top and not subdirs and len(named) == len(top) and len({assignment_of(p.name) for p in top}) == len(top) \
-            and not forced:
-        for p in top:  # one student's folder: notebooks named after the assignments
-            add(path.name, p)
-        return items, skipped
-    for p in top:
-        add(p.stem, p)
-    for d in subdirs:
-        files = _files(d)
-        if not files:
-            skipped.append(f"{d}: no notebook or .py file")
-        for p in files:
-            add(d.name, p)
-    if not items and not skipped:
-        raise DtscalError(f"{path} holds no notebook (.ipynb) or .py submission")
-    return items, skipped
+        add(path.stem, path, path.name)
+    else:
+        subdirs = sorted(d for d in path.iterdir() if d.is_dir() and not d.name.startswith((".", "__")))
+        top = sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
+        code = [p for p in top if p.suffix in SUFFIXES]
+        named = [p for p in code if assignment_of(p.name) or _ungraded(p.name)]
+        if code and not subdirs and len(named) == len(code) and not forced \
+                and len({assignment_of(p.name) for p in code}) == len(code):
+            for p in top:  # one student's folder: notebooks named after the assignments
+                add(path.name, p, p.name)
+        else:
+            for p in top:
+                if p.suffix in SUFFIXES:
+                    add(p.stem, p, p.name)
+            for d in subdirs:
+                files = _files(d)
+                if d.name not in r.students:
+                    r.students.append(d.name)
+                if not files:
+                    r.note(d.name, f"{d.name}/: no notebook or .py file handed in")
+                for p in files:
+                    add(d.name, p, p.relative_to(path).as_posix())
+            if not r.students:
+                raise DtscalError(f"{path} holds no notebook (.ipynb) or .py submission")
+    r.assignments = [forced] if forced else sorted({i.assignment for i in r.items})
+    for s in r.students:
+        for a in r.assignments:
+            if (s, a) not in taken:
+                r.note(s, f"{a}: not handed in (0 points)")
+    return r
+
+
+def discover(path, assignment: str | None = None) -> tuple[list[Item], list[str]]:
+    """The submissions under ``path`` and the notes on everything else (student: note)."""
+    r = roster(path, assignment)
+    return r.items, [f"{s}: {n}" for s in r.students for n in r.notes.get(s, [])
+                     if " graded as " not in n and not n.endswith("not handed in (0 points)")]
 
 
 def grade_all(items: list[Item], material: Material, *, jobs: int = 1, progress: bool = False,

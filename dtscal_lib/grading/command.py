@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import sys
-from collections import defaultdict
 
-from .sandbox import CPU_S, MEM_MB, WALL_S
+from .sandbox import CPU_S, MEM_MB, WALL_S, validate_limits
 
 
 def add_parser(sub) -> None:
@@ -17,6 +16,8 @@ def add_parser(sub) -> None:
                                          "file name)")
     sp.add_argument("--json", metavar="FILE", help="write Gradescope's results.json (a class: one entry per student)")
     sp.add_argument("--csv", metavar="FILE", help="class summary: one row per student, one column per function")
+    sp.add_argument("--report", metavar="DIR", help="write the class report page (score distribution per "
+                                                    "function, most frequent mistakes) to DIR/index.html")
     sp.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (default 1)")
     sp.add_argument("--material", metavar="KIT", help="kit folder with grading/ and solutions/ (default: this kit)")
     sp.add_argument("--gradescope-bundle", metavar="OUT.zip", help="write the Gradescope autograder zip and exit")
@@ -29,7 +30,8 @@ def add_parser(sub) -> None:
 
 def cmd_grade(args) -> int:
     from ..errors import DtscalError
-    from .classroom import discover, grade_all
+    from .classroom import grade_all, roster
+    from .grade import not_handed_in
     from .material import Material
     from .report import gradescope, text, write_csv, write_json
 
@@ -41,28 +43,46 @@ def cmd_grade(args) -> int:
         return 0
     if not args.submission:
         raise DtscalError("give a submission (notebook, .py file or folder), or --gradescope-bundle OUT.zip")
-    if args.jobs < 1:
-        raise DtscalError("--jobs must be at least 1")
+    if not 1 <= args.jobs <= 64:
+        raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
+    validate_limits(args.wall, args.cpu, args.mem)
+    import tempfile
+
+    from .bundle import unpack_zip_submission
+
     material = Material.load(args.material)
-    items, skipped = discover(args.submission, args.assignment)
-    for s in skipped:
-        print(f"skipped {s}", file=sys.stderr)
-    results = grade_all(items, material, jobs=args.jobs, progress=not args.quiet,
+    unpacked = tempfile.TemporaryDirectory(prefix="dtscal-handin-")  # a hand-in zip (`dtscal handin`)
+    r = roster(unpack_zip_submission(args.submission, unpacked.name), args.assignment)
+    for student in r.students:  # also in the CSV and JSON, next to the student's grades
+        for n in r.notes.get(student, []):
+            print(f"{student}: {n}", file=sys.stderr)
+    results = grade_all(r.items, material, jobs=args.jobs, progress=not args.quiet,
                         wall_s=args.wall, cpu_s=args.cpu, mem_mb=args.mem)
-    by_student = defaultdict(list)
-    for r in results:
-        by_student[r.student].append(r)
+    by_student = {s: [] for s in r.students}
+    for item, res in zip(r.items, results):
+        by_student[item.student].append(res)
+    for s, rs in by_student.items():  # the same columns and maximum for every student
+        have = {x.assignment for x in rs}
+        rs.extend(not_handed_in(a, material, s) for a in r.assignments if a not in have)
+        rs.sort(key=lambda x: x.assignment)
     if not args.quiet:
-        for r in results:
-            print(text(r))
+        for res in results:
+            print(text(res))
             print()
     if args.json:
         if len(by_student) == 1:
-            write_json(args.json, gradescope(next(iter(by_student.values()))))
+            s = next(iter(by_student))
+            write_json(args.json, gradescope(by_student[s], r.notes.get(s, [])))
         else:
-            write_json(args.json, {"students": {s: gradescope(rs) for s, rs in sorted(by_student.items())}})
+            write_json(args.json, {"students": {s: gradescope(rs, r.notes.get(s, []))
+                                                for s, rs in sorted(by_student.items())}})
     if args.csv:
-        write_csv(args.csv, by_student)
+        write_csv(args.csv, by_student, r.notes)
+    if args.report:
+        from .classreport import write_report
+
+        page = write_report(args.report, by_student, r.notes)
+        print(f"class report: {page}", file=sys.stderr)
     if len(by_student) > 1:
         print(f"graded {len(results)} submission(s) of {len(by_student)} student(s)"
               + (f"; summary in {args.csv}" if args.csv else ""), file=sys.stderr)

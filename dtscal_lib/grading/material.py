@@ -82,6 +82,8 @@ class Material:
     points: float
     specs: dict[str, list[dict]]
     _built: dict[str, dict[str, list[Built]]] = field(default_factory=dict)
+    #: derived tolerances of the noisy checks (grading/tolerances.json, see .tolerances)
+    tolerances: dict = field(default_factory=dict)
 
     @classmethod
     def load(cls, root=None) -> "Material":
@@ -97,7 +99,13 @@ class Material:
             for f in funcs:
                 if not specs.get(f):
                     raise MaterialError(f"grading/cases.py has no checks for {f} ({a})")
-        return cls(root, float(ns.get("POINTS_PER_FUNCTION", 10)), specs)
+        from .tolerances import load as load_tolerances
+
+        try:
+            tolerances = load_tolerances(root)
+        except ValueError as exc:
+            raise MaterialError(f"grading/tolerances.json is not readable: {exc}") from exc
+        return cls(root, float(ns.get("POINTS_PER_FUNCTION", 10)), specs, tolerances=tolerances)
 
     @property
     def blocked_paths(self) -> list[Path]:
@@ -113,7 +121,7 @@ class Material:
             refs = reference_functions(nb, ASSIGNMENTS[assignment])
             built = {}
             for func in ASSIGNMENTS[assignment]:
-                checks = [build_check(func, spec, refs[func]) for spec in self.specs[func]]
+                checks = [build_check(func, spec, refs[func], self.tolerances) for spec in self.specs[func]]
                 total = sum(c.weight for c in checks)
                 for c in checks:  # weights are relative; each function is worth `points`
                     c.weight = round(self.points * c.weight / total, 4)

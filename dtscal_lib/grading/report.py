@@ -32,9 +32,10 @@ def text(res: GradeResult) -> str:
     return "\n".join(lines)
 
 
-def gradescope(results: list[GradeResult]) -> dict:
-    """Gradescope's ``results.json`` for one student (one or several notebooks)."""
-    tests, out = [], []
+def gradescope(results: list[GradeResult], notes: list[str] = ()) -> dict:
+    """Gradescope's ``results.json`` for one student (one or several notebooks), with the
+    notes on the student's files that were not graded (and why)."""
+    tests, out = [], list(notes)
     for res in results:
         out += [f"{res.assignment}: {n}" for n in res.notes]
         for f in res.functions:
@@ -63,19 +64,24 @@ def write_json(path, obj) -> Path:
     return path
 
 
-def write_csv(path, by_student: dict[str, list[GradeResult]]) -> Path:
-    """One row per student, one column per graded function, then total and maximum."""
+def write_csv(path, by_student: dict[str, list[GradeResult]], notes: dict | None = None) -> Path:
+    """One row per student (also those with nothing graded), one column per graded function,
+    then total, maximum (the class's: the same for everyone) and the notes on that student's files."""
+    notes = notes or {}
     funcs = [f for a, fs in ASSIGNMENTS.items() for f in fs
              if any(r.assignment == a for rs in by_student.values() for r in rs)]
+    maximum = 0.0
+    for rs in by_student.values():
+        maximum = max(maximum, sum(r.max_score for r in rs))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["student", *funcs, "total", "max"])
+        w.writerow(["student", *funcs, "total", "max", "notes"])
         for student in sorted(by_student):
             scores = {f.name: f.score for r in by_student[student] for f in r.functions}
             total = sum(r.score for r in by_student[student])
-            maximum = sum(r.max_score for r in by_student[student])
-            w.writerow([student, *[f"{scores[f]:g}" if f in scores else "" for f in funcs], f"{total:g}",
-                        f"{maximum:g}"])
+            extra = [f"{r.assignment}: {n}" for r in by_student[student] for n in r.notes]
+            w.writerow([student, *[f"{scores.get(f, 0):g}" for f in funcs], f"{total:g}", f"{maximum:g}",
+                        "; ".join([*notes.get(student, []), *extra])])
     return path

@@ -29,6 +29,42 @@ import numpy as np
 
 #: default limits, per check (wall-clock and CPU seconds) and per process (memory)
 WALL_S, CPU_S, MEM_MB, OUTPUT_CHARS = 10.0, 8, 2048, 2000
+#: bounds of the limits an instructor may set (``dtscal grade --wall/--cpu/--mem``):
+#: the reference solutions' slowest check takes well under 1 s, so 600 s per check is already
+#: generous; the preloaded grading process maps 444 MB of address space (VmPeak, numpy +
+#: OpenCV + the kit, measured) before a submission allocates anything: 1024 MB leaves room
+#: for the 640x480 float maps of notebook 04.
+MAX_WALL_S, MAX_CPU_S, MIN_MEM_MB = 600.0, 600, 1024
+
+
+def validate_limits(wall_s, cpu_s, mem_mb) -> None:
+    """Refuse limits that make no sense (NaN, negative, astronomically large), with why."""
+    import math
+
+    from ..errors import DtscalError
+
+    try:
+        wall = float(wall_s)
+    except (TypeError, ValueError):
+        raise DtscalError(f"--wall {wall_s!r}: give the seconds per check as a number") from None
+    if not math.isfinite(wall) or not 0 < wall <= MAX_WALL_S:
+        raise DtscalError(f"--wall {wall_s}: give a time limit per check between 0 and {MAX_WALL_S:g} s "
+                          f"(default {WALL_S:g})")
+    if isinstance(cpu_s, bool) or not isinstance(cpu_s, int) or not 1 <= cpu_s <= MAX_CPU_S:
+        raise DtscalError(f"--cpu {cpu_s}: give whole CPU seconds per check between 1 and {MAX_CPU_S} "
+                          f"(default {CPU_S})")
+    if mem_mb is None:
+        return
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2 ** 20
+    if isinstance(mem_mb, bool) or not isinstance(mem_mb, int) or not MIN_MEM_MB <= mem_mb <= max(total, MIN_MEM_MB):
+        raise DtscalError(f"--mem {mem_mb}: give the memory per submission in MB, between {MIN_MEM_MB} (what the "
+                          f"grading process itself maps) and {total} (this machine's memory); default {MEM_MB}")
+
+
+#: barriers to leave out ("namespaces", "landlock"): only for tests of the fallbacks, which
+#: are what a machine without them gets
+WITHOUT: set[str] = set()
+
 #: time allowed for starting the child and loading the submission
 LOAD_WALL_S = 30.0
 MAX_ARRAY_BYTES = 256 * 2 ** 20
@@ -46,6 +82,8 @@ class Call:
     args_after: list | None = None
     note: str = ""
     seconds: float = 0.0
+    #: solving routines (OpenCV's, the kit's) the call reached inside the sandbox
+    honesty: list = field(default_factory=list)
 
 
 @dataclass
@@ -115,14 +153,19 @@ class _Opaque:
         return f"<a {self.type_name} object>"
 
 
-def _read_results(out: Path, check_id: int) -> list[Call] | None:
+def _read_results(out: Path, check_id: int, nonce: str) -> list[Call] | None:
+    """The answers of one check, or None when absent, unreadable or not carrying ``nonce``
+    (the token the supervisor sent when the check started: nothing written before counts)."""
     f = out / f"check_{check_id}.json"
     if not f.is_file() or f.is_symlink() or f.stat().st_size > 10 * 2 ** 20:
         return None
     try:
-        entries = json.loads(f.read_text())
+        data = json.loads(f.read_text())
     except Exception:
         return None
+    if not isinstance(data, dict) or not nonce or data.get("nonce") != nonce:
+        return None
+    entries = data.get("calls")
     if not isinstance(entries, list):
         return None
     calls = []
@@ -137,6 +180,9 @@ def _read_results(out: Path, check_id: int) -> list[Call] | None:
             c.seconds = float(e.get("time", 0.0))
         except (TypeError, ValueError):
             pass
+        honesty = e.get("honesty")
+        if isinstance(honesty, list):
+            c.honesty = [str(h)[:80] for h in honesty[:10]]
         after = e.get("args_after")
         if isinstance(after, list):
             c.args_after = [_decode(a, out)[0] if a else None for a in after]
@@ -250,17 +296,43 @@ _SERVER = _ForkServer()
 atexit.register(_SERVER.close)
 
 
+class _UidSlots:
+    """Concurrent submissions get different uids (as root): slot k -> a uid no account uses."""
+
+    def __init__(self):
+        self.lock, self.used = threading.Lock(), set()
+
+    def take(self) -> int:
+        with self.lock:
+            k = next(i for i in range(len(self.used) + 1) if i not in self.used)
+            self.used.add(k)
+            return k
+
+    def give(self, k: int) -> None:
+        with self.lock:
+            self.used.discard(k)
+
+
+_SLOTS = _UidSlots()
+
+
 def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars, files) -> list[dict]:
     """One sandboxed process; returns the checks still to run (after a crash of the process itself)."""
-    tmp = Path(tempfile.mkdtemp(prefix="dtscal-grade-"))
+    from .barriers import free_uid
+
+    slot = _SLOTS.take()
+    uid = free_uid(slot) if os.getuid() == 0 else None
+    tmp = Path(tempfile.mkdtemp(prefix="dtscal-grade-"))  # 0700
     work, out = tmp / "work", tmp / "work" / ".answers"
     out.mkdir(parents=True)
     for name, data in files.items():
         (work / name).write_bytes(data)
-    os.chmod(tmp, 0o755)
+    if uid is not None:  # the submission's uid owns its working folder, and nothing else
+        for d in (tmp, work, out, *(work / n for n in files)):
+            os.chown(d, uid, uid)
     job = {"statements": statements, "skip": sorted(skip), "checks": todo, "workdir": str(work),
-           "outdir": str(out), "mem_mb": mem_mb, "output_limit": output_chars,
-           "blocked_paths": [str(p) for p in blocked_paths]}
+           "outdir": str(out), "mem_mb": mem_mb, "output_limit": output_chars, "uid": uid,
+           "blocked_paths": [str(p) for p in blocked_paths], "without": sorted(WITHOUT)}
     pid, r_ctl, r_out = _SERVER.spawn(job)
     sink: list[bytes] = []
     stdout = os.fdopen(r_out, "rb", buffering=0)
@@ -268,15 +340,16 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
     drainer.start()
     remaining = list(todo)
     by_id = {c["id"]: c for c in todo}
+    loader = None
     try:
         buf = b""
-        current, loading = None, None
+        current, loading, nonce = None, None, ""
         deadline = time.monotonic() + LOAD_WALL_S
         while True:
             wait = deadline - time.monotonic()
             ready = select.select([r_ctl], [], [], max(0.0, wait))[0] if wait > 0 else []
             if not ready:  # a deadline passed: the process itself is stuck
-                _kill(pid)
+                _kill(pid, loader)
                 if current is not None:
                     run.checks[current] = CheckRun(failure=_describe("wall", by_id[current]["wall"], 0, mem_mb))
                     remaining = [c for c in remaining if c["id"] != current]
@@ -298,7 +371,7 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
                                        + b"".join(sink).decode(errors="replace")[-2000:])
                 return remaining
             buf += chunk
-            while b"\n" in buf:
+            while b"\n" in buf:  # written by the supervisor only (no student code runs there)
                 line, buf = buf.split(b"\n", 1)
                 try:
                     msg = json.loads(line)
@@ -308,9 +381,12 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
                         if ev in ("start", "done") and key not in by_id:
                             continue
                 except (ValueError, KeyError, TypeError, AttributeError):
-                    continue  # not ours: a submission writing on the control pipe
-                if ev == "sandbox":
-                    run.notes = msg.get("notes", {})
+                    continue
+                if ev == "loader":
+                    loader = int(msg.get("pid", 0)) or None
+                elif ev == "sandbox":
+                    run.notes = dict(msg.get("notes", {}))
+                    run.notes["uid"] = uid
                 elif ev == "load":
                     loading = int(msg["k"])
                 elif ev == "load_error":
@@ -319,33 +395,85 @@ def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars,
                 elif ev == "ready":
                     loading = None
                 elif ev == "start":
-                    current = int(msg["id"])
+                    current, nonce = int(msg["id"]), str(msg.get("nonce", ""))
                     deadline = time.monotonic() + by_id[current]["wall"] + 5.0
                 elif ev == "done":
                     cid = int(msg["id"])
                     c = by_id[cid]
-                    calls = _read_results(out, cid)
+                    calls = _read_results(out, cid, nonce) if cid == current else None
                     if calls is None:
                         failure = _describe(str(msg.get("status", "")), c["wall"], c["cpu"], mem_mb)
                         run.checks[cid] = CheckRun(failure=failure)
                     else:
                         run.checks[cid] = CheckRun(calls=calls)
                     remaining = [r for r in remaining if r["id"] != cid]
-                    current = None
+                    current, nonce = None, ""
                     deadline = time.monotonic() + 30.0
                 elif ev == "finished":
                     return remaining
     finally:
-        _kill(pid)
+        _kill(pid, loader)
+        left = _survivors(pid, loader, uid, pid_namespace=bool(run.notes.get("pid_namespace")))
+        run.notes["survivors"] = run.notes.get("survivors", 0) + left
         os.close(r_ctl)
         drainer.join(timeout=2)
         stdout.close()
         shutil.rmtree(tmp, ignore_errors=True)
+        _SLOTS.give(slot)
 
 
-def _kill(pid: int) -> None:
-    """Kill a sandboxed process and everything it started (its own session)."""
+def _alive(pid: int) -> bool:
     try:
-        os.killpg(pid, signal.SIGKILL)
+        stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
-        pass
+        return False
+    return stat[stat.rindex(")") + 2] not in "ZX"
+
+
+def _survivors(sid: int, loader: int | None, uid: int | None, rounds: int = 50, pid_namespace=False) -> int:
+    """Kill what is left of a submission (its session, its loader, its uid); returns how many
+    processes were still alive after ``rounds`` attempts (0: nothing survives). In a PID
+    namespace it is enough that its init (the loader) is gone: the kernel kills the rest."""
+    if pid_namespace and loader:
+        for _ in range(rounds):
+            if not _alive(loader) and not _alive(sid):
+                return 0
+            _kill(sid, loader)
+            time.sleep(0.005)
+        pid_namespace = False  # the init would not die: look for everything
+    found: list[int] = []
+    for _ in range(rounds):
+        found = []
+        for d in os.listdir("/proc"):
+            if not d.isdigit():
+                continue
+            try:
+                stat = Path(f"/proc/{d}/stat").read_text()
+                fields = stat[stat.rindex(")") + 2:].split()
+                owner = os.stat(f"/proc/{d}").st_uid
+            except (OSError, ValueError):
+                continue
+            if fields[0] in "ZX":
+                continue
+            p = int(d)
+            if int(fields[3]) == sid or p == loader or (uid is not None and owner == uid):
+                found.append(p)
+                try:
+                    os.kill(p, signal.SIGKILL)
+                except OSError:
+                    pass
+        if not found:
+            return 0
+        time.sleep(0.02)
+    return len(found)
+
+
+def _kill(pid: int, loader: int | None = None) -> None:
+    """Kill a sandboxed supervisor, everything in its session, and its loader (init of the
+    submission's PID namespace: the kernel then kills every process in it)."""
+    for f, p in ((os.killpg, pid), (os.kill, loader)):
+        if p:
+            try:
+                f(p, signal.SIGKILL)
+            except OSError:
+                pass

@@ -240,7 +240,7 @@ def _ground(cols, rows, sq, x0, y0):
 
 def _ground_reordered(cols, rows, sq, x0, y0, how):
     g = _ground(cols, rows, sq, x0, y0).reshape(int(rows), int(cols), 2)
-    return {"col": g.transpose(1, 0, 2), "left": g[:, ::-1]}[how].reshape(-1, 2)
+    return {"col": g.transpose(1, 0, 2), "left": g[:, ::-1], "far": g[::-1]}[how].reshape(-1, 2)
 
 
 def _radial_in_r(xy, d):
@@ -334,6 +334,9 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
             EQ36), lambda s, d: _fit_variant(s, d, "bad_denorm")),
         (_M("bad_denormalization", "bad denormalization: undo the normalization as H = inv(T_dst) @ H_n @ T_src",
             EQ36), lambda s, d: _fit_variant(s, d, "no_denorm")),
+        (_M("denormalization_order", "de-normalization in the wrong order: H_n maps normalized src to normalized "
+            "dst, so H = inv(T_dst) @ H_n @ T_src (not inv(T_src) @ H_n @ T_dst)", EQ36),
+         lambda s, d: _fit_variant(s, d, "swapped_denorm")),
         (_M("no_normalization", "no normalization: without Hartley's normalization the DLT fails on "
             "coordinates in the thousands; centre and scale both point sets first", EQ36),
          lambda s, d: _raw_dlt(s, d)),
@@ -354,8 +357,8 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
         (_M("lambda_ignored", "lambda ignored: B = lambda K^-T K^-1 is known up to scale; compute lambda and use "
             "it in fx, fy, s, cx", EQ1213), None),
         (_M("skew_dropped", "the skew is dropped: K[0, 1] = s = -B12 fx^2 fy / lambda", EQ1213), None),
-        (_M("principal_point_formula", "principal point formula slip: cx = s cy / fy - B13 fx^2 / lambda "
-            "(the skew term is missing)", EQ1213), None),
+        (_M("principal_point_formula", "principal point formula slip: only cx is wrong; cx = s cy / fy - B13 "
+            "fx^2 / lambda (check the skew term s cy / fy)", EQ1213), None),
         (_M("skew_formula", "skew formula slip: s = -B12 fx^2 fy / lambda (sign)", EQ1213), None),
     ]),
     "extrinsics_from_homography": (None, [
@@ -395,6 +398,10 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
             "away)", EQ6), lambda *a: _ground_reordered(*a, "col")),
         (_M("from_left", "corners starting from the left: corner 0 is the near-RIGHT corner and y grows to the "
             "left", EQ6), lambda *a: _ground_reordered(*a, "left")),
+        (_M("from_far_row", "corners starting from the far row: corner 0 is on the NEAR row (x = x0), rows go "
+            "away from the robot", EQ6), lambda *a: _ground_reordered(*a, "far")),
+        (_M("from_far_left", "corners starting from the far-left corner: corner 0 is the near-RIGHT corner (x0, y0)",
+            EQ6), lambda *a: _ground(*a)[::-1]),
         (_M("off_by_one_square", "ground points off by one square: corner 0 is at (x0, y0) itself", EQ6),
          lambda c, r, sq, x0, y0: _ground(c, r, sq, x0 + sq, y0)),
         (_M("off_by_one_square", "ground points off by one square: corner 0 is at (x0, y0) itself", EQ6),
@@ -417,7 +424,7 @@ def _fit_variant(src, dst, how):
         return Hi / Hi[2, 2]
     Ts, Td = _hartley(np.asarray(src, float)), _hartley(np.asarray(dst, float))
     Hn = Td @ H @ np.linalg.inv(Ts)
-    Hb = {"bad_denorm": Ts @ Hn @ np.linalg.inv(Td), "no_denorm": Hn,
+    Hb = {"bad_denorm": Ts @ Hn @ np.linalg.inv(Td), "no_denorm": Hn, "swapped_denorm": np.linalg.inv(Ts) @ Hn @ Td,
           "transposed_n": np.linalg.inv(Td) @ Hn.T @ Ts}[how]
     return Hb / Hb[2, 2]
 
@@ -432,7 +439,7 @@ def _k_predicates(K, K_true) -> str | None:
     if f(fx, t_fx) and f(fy, t_fy) and f(cy, t_cy):
         if abs(s) < 1e-9 and t_s != 0:
             return "skew_dropped"
-        if f(s, t_s) and not f(cx, t_cx) and abs((t_cx - cx) - t_s * t_cy / t_fy) < 1e-5 * abs(t_fx):
+        if f(s, t_s) and not f(cx, t_cx):  # only cx is wrong: its formula (the skew term) slipped
             return "principal_point_formula"
         if f(s, -t_s) and t_s != 0:
             return "skew_formula"
@@ -537,6 +544,15 @@ def diagnose(func: str, args_list: list[tuple], outputs: list[Any]) -> Mistake |
             continue
         if all(_close(g, w, dtype=dtype) for g, w in zip(got[exact], wrong[exact])):
             return mistake
+    if dtype:  # the maps: a mistake of values and a mistake of dtype together
+        for mistake, model in models:
+            try:
+                wrong = [_as_arrays(model(*a)) for a in args_list]
+            except Exception:
+                continue
+            if mistake.key != "maps_dtype" and all(_close(g, w) for g, w in zip(got, wrong)):
+                return Mistake(mistake.key + "+dtype", mistake.text + "; and the maps should be float32 (cv2.remap "
+                               "wants float32)", mistake.equation)
     return None
 
 

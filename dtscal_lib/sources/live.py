@@ -94,8 +94,18 @@ class LiveSource:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._closed = False
+        self._listeners: list = []
 
     # ------------------------------------------------------------------ public
+    def add_status_listener(self, callback) -> None:
+        """Call ``callback(LiveStatus)`` (in the receiver's thread) whenever the state or message changes.
+
+        The status hook of a UI: its status line follows the source at once, frames or not (a
+        source that cannot connect says why before any frame could arrive). A failing callback
+        is ignored: it must never stop the receiver.
+        """
+        self._listeners.append(callback)
+
     def start(self) -> LiveSource:
         """Begin receiving in the background (no-op when already receiving); returns self."""
         if self._closed:
@@ -194,8 +204,16 @@ class LiveSource:
 
     def _set_state(self, state: str, message: str) -> None:
         with self._cond:
+            changed = (self._state, self._message) != (state, message)
             self._state, self._message = state, message
             self._cond.notify_all()
+        if changed and self._listeners:
+            st = self.status
+            for callback in list(self._listeners):
+                try:
+                    callback(st)
+                except Exception:  # noqa: BLE001 (a UI's bug must not stop the receiver)
+                    pass
 
     # ------------------------------------------------------------------ internals
     def _worker(self, stop: threading.Event) -> None:
@@ -424,6 +442,7 @@ class RosLive(LiveSource):
         if not self.topic.startswith("/"):
             raise SourceError(f"topic {self.topic!r} must start with '/'")
         self.master = master_uri(master)
+        self._master_given = bool(master or os.environ.get("ROS_MASTER_URI"))
         self._python = ros_python()
         self._proc: subprocess.Popen | None = None
         self._log = tempfile.TemporaryFile()  # noqa: SIM115 (the helper's stderr, open while the source lives)
@@ -449,9 +468,33 @@ class RosLive(LiveSource):
         except (OSError, ValueError):
             return ""
 
+    def _diagnose(self, stop: threading.Event) -> bool:
+        """Say what is wrong before starting the helper; True when a ROS connection cannot work."""
+        from . import ros_diagnosis as diag
+
+        problem = diag.master_problem(self.master, uri_was_set=self._master_given) or diag.callback_problem()
+        if problem:
+            if not stop.is_set():
+                self._set_state("error", problem)
+            return True
+        waiting = diag.topic_problem(self.master, self.topic, self.robot)
+        if waiting and not stop.is_set():
+            self._set_state("connecting", waiting)
+        return False
+
+    def _waiting_message(self, helper_message: str) -> str:
+        from . import ros_diagnosis as diag
+
+        try:
+            return diag.topic_problem(self.master, self.topic, self.robot) or helper_message
+        except Exception:  # noqa: BLE001 (the helper's own sentence is the fallback)
+            return helper_message
+
     def _run(self, stop: threading.Event) -> None:
         self._log.seek(0)
         self._log.truncate()
+        if self._diagnose(stop):
+            return
         proc = subprocess.Popen([self._python, str(HELPER), "subscribe", self.topic], env=_clean_env(self.master),
                                 stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._log, bufsize=0)
         self._proc = proc
@@ -477,7 +520,8 @@ class RosLive(LiveSource):
                     said_error = True
                     self._set_state("error", st["message"])
                 elif state == "waiting":
-                    self._set_state("ended" if n else "connecting", st["message"])
+                    self._set_state("ended" if n else "connecting",
+                                    st["message"] if n else self._waiting_message(st["message"]))
                 elif state == "running" and self.status.state != "running":
                     self._set_state("connecting", f"{st['message']}, but no frame arrived yet; if this lasts, set "
                                                   "ROS_IP (or ROS_HOSTNAME) to an address of this computer that "
@@ -511,7 +555,9 @@ class LiveFrames:
     kind = "live"
 
     def __init__(self, spec: str, *, topic: str | None = None, max_seconds: float | None = None,
-                 done=None, master_uri: str | None = None):
+                 done=None, master_uri: str | None = None, say=None):
+        #: called with each new sentence on why no frame arrives yet (default: a line on stderr)
+        self.say = say if say is not None else _say_on_stderr
         self.spec = spec
         self.live = open_live(spec, topic=topic, master_uri=master_uri)
         self.topic = self.live.topic
@@ -529,6 +575,7 @@ class LiveFrames:
     def __iter__(self):
         t0 = time.monotonic()
         after = -1
+        said = ""
         with self.live as cam:
             while True:
                 if self.done():
@@ -543,6 +590,10 @@ class LiveFrames:
                     yield f
                     continue
                 st = cam.status
+                if after < 0 and st.state == "connecting" and st.message != said:
+                    said = st.message
+                    if not st.message.startswith("connecting to "):
+                        self.say(st.message.replace("press Reconnect", "the command goes on by itself"))
                 if st.state in ("ended", "error"):
                     self.stopped = (st.message.replace("press Reconnect", "run the command again")
                                     .replace("Press Reconnect", "Run the command again"))
@@ -550,6 +601,12 @@ class LiveFrames:
             self.bad = cam.status.bad
         if after < 0 and self.stopped and not self.stopped.startswith("stopped"):
             raise SourceError(f"no frame from {self.live.describe()}: {self.stopped}")
+
+
+def _say_on_stderr(message: str) -> None:
+    import sys
+
+    print(f"dtscal: waiting: {message}", file=sys.stderr, flush=True)
 
 
 # ---------------------------------------------------------------------- the one entry point

@@ -11,8 +11,11 @@ homography fitted (:func:`dtscal_lib.ground.extrinsics_from_image`). The tool sh
 * a validation view with the best homography: the ground grid drawn back on the live image
   and a bird's-eye view of the scene.
 
-SAVE writes the *best* homography as ``camera_extrinsic/<ROBOT>.yaml`` into the calibration
-folder (Duckietown's classic ``homography:`` file).
+The fits happen in a :class:`dtscal_lib.session.ExtrinsicSession` (the one ``dtscal
+calibrate-extrinsics`` drives), keeping the best. SAVE writes the *best* homography as
+``camera_extrinsic/<ROBOT>.yaml`` into the calibration folder (Duckietown's classic ``homography:``
+file, or version 2) through the session's gate: a homography the kit does not believe is refused
+as by the command line ("keep anyway" writes ``ROBOT.rejected.yaml`` beside, never uploaded).
 
 Examples
 --------
@@ -32,12 +35,13 @@ import numpy as np
 from .. import calib_files
 from ..boards import DUCKIETOWN_BOARD, Board, ground_points
 from ..camera import CameraModel, rectify_image
-from ..errors import DtscalError
-from ..ground import birdseye_view, draw_ground_grid, extrinsics_from_image, pixel_to_ground
-from . import render
+from ..errors import DtscalError, ImplausibleCalibrationError, Reason
+from ..ground import birdseye_view, draw_ground_grid, pixel_to_ground
+from ..session import ExtrinsicSession, robot_name
 from ..sources.live import open_live
+from . import render
 from .frameloop import DisplayPacer, FrameLoop, ack_widgets
-from .intrinsic import rectification_maps_fast, robot_of
+from .render import rectification_maps_fast
 
 
 class _MapsCamera(CameraModel):
@@ -76,14 +80,14 @@ class LiveExtrinsics:
         self.board = board
         self.spec = str(getattr(source, "spec", source))
         self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
-        self.robot = robot or robot_of(self.spec, self.source) or "camera"
         if isinstance(intrinsics, (str, Path)):
             intrinsics = calib_files.load_intrinsics(intrinsics).camera()
         self._intrinsics = intrinsics
+        #: where the fits happen (the session the command line drives), keeping the best
+        self.session = ExtrinsicSession(None, board, keep="best", source=self.spec,
+                                        robot=robot_name(self.spec, self.source, robot) or "camera")
         self.ground_true = ground_points(board)
         self.current = None
-        self.best = None
-        self.best_frame = -1
         self.reason = ""
         self.bad: Counter = Counter()
         self.frames_seen = 0
@@ -110,6 +114,7 @@ class LiveExtrinsics:
                                  value="classic", description="format")
         self.target = w.Dropdown(options=[("calibration folder", "folder"), ("folder and robot (upload)", "robot")],
                                  value="robot" if self.spec.startswith("ros:") else "folder", description="save to")
+        self.keep_anyway = w.Checkbox(value=False, description="keep anyway (expert)", indent=False)
         self.message = w.HTML("")
         for b, fn in ((self.save_button, self.save), (self.reset_button, self.reset_best),
                       (self.reconnect_button, self.reconnect)):
@@ -119,7 +124,7 @@ class LiveExtrinsics:
             self.status,
             w.HBox([self.image, w.VBox([w.HTML("<b>top view of the board</b>"), self.top, self.error_text])]),
             w.HBox([self.save_button, self.reset_button, self.reconnect_button, self.robot_text]),
-            w.HBox([self.folder_text, self.format, self.target]), self.message,
+            w.HBox([self.folder_text, self.format, self.target, self.keep_anyway]), self.message,
             w.HTML("<b>validation</b> with the best homography: ground grid (5 cm) on the live image, "
                    "and a bird's-eye view"),
             w.HBox([self.grid, self.birdseye]),
@@ -159,6 +164,24 @@ class LiveExtrinsics:
         bundle["text/plain"] = "live extrinsic tool (shown as a widget in JupyterLab)"
         return bundle
 
+    # ------------------------------------------------------------------ the session's state
+    @property
+    def robot(self) -> str:
+        return self.session.robot
+
+    @robot.setter
+    def robot(self, name: str) -> None:
+        self.session.robot = name
+
+    @property
+    def best(self):
+        """The best fit so far (:class:`~dtscal_lib.ground.ExtrinsicResult`), or None."""
+        return self.session.best
+
+    @property
+    def best_frame(self) -> int:
+        return self.session.best_frame
+
     # ------------------------------------------------------------------ intrinsics
     def camera(self) -> CameraModel | None:
         """The intrinsic calibration in use (None while a live calibrator has none yet)."""
@@ -177,7 +200,7 @@ class LiveExtrinsics:
             self._maps = fast.rectification_maps()
             if old is not None:  # a new intrinsic calibration: fits made with the old one no longer count
                 self.reset_best()
-            self._maps_for = fast
+            self._maps_for = self.session.camera = fast
         return rectify_image(img, self._maps), self._maps_for
 
     # ------------------------------------------------------------------ frame loop
@@ -212,19 +235,16 @@ class LiveExtrinsics:
             self.bad["size_mismatch"] += 1
             return False
         rect, cam = self._rectify(img, cam)
-        try:
-            res = extrinsics_from_image(img, cam, self.board)
-        except DtscalError as exc:
-            res, self.reason = None, str(exc)
-        except cv2.error:
-            res, self.reason = None, "OpenCV could not process this frame"
+        offer = self.session.offer(frame, camera=cam)
+        res = offer.detection
+        if res is None and offer.reason == Reason.DETECTOR_ERROR:
+            self.reason = "OpenCV could not process this frame"
             self.bad["detector_error"] += 1
+        elif res is None:
+            self.reason = str(self.session.last_error)
         if res is not None:
-            err = float(np.mean(res.residual_mm))
             with self._lock:
                 self.current = res
-                if self.best is None or err < float(np.mean(self.best.residual_mm)):
-                    self.best, self.best_frame = res, frame.index
                 best = self.best
             if self.save_button.disabled:
                 self.save_button.disabled = False
@@ -271,31 +291,39 @@ class LiveExtrinsics:
     # ------------------------------------------------------------------ actions
     def save(self) -> str:
         """Write the best homography so far as ``camera_extrinsic/<ROBOT>.yaml`` in the folder
-        (classic or version-2 format) and, with the target "robot", upload it to the robot."""
+        (classic or version-2 format) and, with the target "robot", upload it to the robot.
+
+        The session's gate comes first, as for ``dtscal calibrate-extrinsics``: a homography the kit does
+        not believe is refused (nothing written); "keep anyway" writes it as ``<ROBOT>.rejected.yaml``
+        beside the robot's file and never uploads it."""
         with self._lock:
             best, frame = self.best, self.best_frame
         if best is None:
             return self._say("nothing to save yet: no frame gave a fit", "error")
         try:
-            robot = calib_files.check_robot_name(self.robot)
-            cam = self.camera()
-            calib = calib_files.IntrinsicCalibration.from_camera(cam, camera_name=f"/{robot}/camera_node")
-            path = calib_files.save_extrinsics_as(best.H, self.folder_text.value.strip(), robot,
-                                                  fmt=self.format.value, intrinsics=calib)
+            path = self.session.write(self.folder_text.value.strip(), keep_anyway=bool(self.keep_anyway.value),
+                                      fmt=self.format.value)
             text = (f"SAVE: wrote {path} (best fit, frame {frame}, mean error "
                     f"{np.mean(best.residual_mm):.2f} mm)")
+            if self.session.doubts:
+                return self._say(text + "; kept against the kit's doubts: " + "; ".join(map(str, self.session.doubts))
+                                 + ". It is not sent to the robot.", "error")
             if self.target.value == "robot":
-                from ..robot import commit_extrinsics
-
-                text += "; " + commit_extrinsics(robot, path, master_uri=getattr(self.source, "master", None))
+                text += "; " + self.session.commit(master_uri=getattr(self.source, "master", None),
+                                                   fmt=self.format.value)
+        except ImplausibleCalibrationError as exc:
+            doubts = "".join(f"<br>- {d}" for d in exc.doubts)
+            return self._say(f"SAVE refused: the kit does not believe this homography, nothing was written:{doubts}"
+                             "<br>Place the robot on the board as in the Duckietown procedure, or, as an expert, "
+                             f"tick \"keep anyway\" to keep it as {self.robot}{calib_files.REJECTED_SUFFIX}.yaml "
+                             "beside the robot's file.", "error")
         except (DtscalError, OSError) as exc:
             return self._say(f"SAVE failed: {exc}. The previous file is unchanged.", "error")
         return self._say(text, "ok")
 
     def reset_best(self) -> None:
         """Forget the best fit (e.g. after moving the robot on the board)."""
-        with self._lock:
-            self.best, self.best_frame = None, -1
+        self.session.forget()
         self.save_button.disabled = True
 
     def _say(self, text: str, kind: str = "info") -> str:

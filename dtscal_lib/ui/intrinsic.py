@@ -11,8 +11,12 @@ with an alpha slider follows. COMMIT sends the calibration to the robot over ROS
 (``set_camera_info``) or writes ``camera_intrinsic/<ROBOT>.yaml`` into a calibration folder;
 SAVE writes the samples and the YAML into one zip that :meth:`LiveCalibrator.load` reads back.
 
-All state lives in one :class:`LiveCalibrator` object; every button has a method of the same
-name, so the tool can be driven from Python (tests, scripts) as well as by clicks.
+The calibration itself happens in a :class:`dtscal_lib.session.IntrinsicSession`, the same one
+``dtscal calibrate-intrinsics`` drives: COMMIT goes through its gate, so the live tool refuses what
+the command line refuses (nothing written; "keep anyway" writes ``ROBOT.rejected.yaml`` beside, and
+never sends it to the robot). :class:`LiveCalibrator` holds the widgets and the threads; every
+button has a method of the same name, so the tool can be driven from Python (tests, scripts) as
+well as by clicks.
 
 Examples
 --------
@@ -22,56 +26,30 @@ Examples
 
 from __future__ import annotations
 
-import html
-import threading
 import time
 from collections import Counter
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from .. import calib_files
 from ..boards import DUCKIETOWN_BOARD, Board
 from ..camera import CameraModel
 from ..coverage import CoverageTracker
-from ..detect import detect_board, draw_detection
-from ..errors import DtscalError
-from ..pipeline import MIN_SAMPLES, calibrate_without_outlier_views, robot_from_topic
+from ..detect import draw_detection
+from ..errors import DtscalError, ImplausibleCalibrationError, Reason
+from ..session import MIN_SAMPLES, IntrinsicSession, robot_name
+from ..sources.live import open_live
 from . import render
 from .archive import load_session, save_session
-from ..sources.live import open_live
 from .frameloop import DisplayPacer, FrameLoop, ack_widgets
-from .solver import SolverProcess, assess_quality
+from .render import rectification_maps_fast, verdict_html  # noqa: F401  (their home was here)
+from .background import BackgroundCalibration, PreviewMaps
 
 
 def robot_of(spec: str, source=None) -> str | None:
-    """The robot a source belongs to: ``ros:NAME`` -> NAME; a bag's camera topic -> its robot."""
-    spec = str(spec)
-    if spec.startswith("ros:"):
-        return spec[4:].strip("/") or None
-    name = getattr(source, "robot", None) or robot_from_topic(getattr(source, "topic", None))
-    if name is None and spec.endswith(".bag"):
-        try:
-            from ..sources import open_source
-
-            name = robot_from_topic(open_source(spec).topic)
-        except DtscalError:
-            name = None
-    return name
-
-
-def verdict_html(quality) -> str | None:
-    """The verdict part of the results panel from :func:`~dtscal_lib.ui.solver.assess_quality`."""
-    if quality is None:
-        return None
-    if isinstance(quality, str):
-        return render.message_html(quality)
-    findings = "".join(f"<li>{html.escape(str(f.message))} <i>{html.escape(str(f.advice))}</i></li>"
-                       for f in getattr(quality, "findings", []))
-    colour = {"good": render.GREEN, "bad": render.RED}.get(str(quality.verdict), "#b7791f")
-    return (f'<span class="dtscal-verdict" style="color:{colour}"><b>{html.escape(str(quality.verdict))}</b></span>'
-            + (f"<ul>{findings}</ul>" if findings else ""))
+    """The robot a source belongs to (:func:`dtscal_lib.session.robot_name`, the kit's one rule)."""
+    return robot_name(spec, source)
 
 
 class LiveCalibrator:
@@ -99,26 +77,22 @@ class LiveCalibrator:
         self.model = model
         self.spec = str(getattr(source, "spec", source))
         self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
-        self.robot = robot or robot_of(self.spec, self.source) or "camera"
-        self.tracker: CoverageTracker | None = None
+        #: where the calibration happens (the same session the command line drives)
+        self.session = IntrinsicSession(board, model=model, first_size_wins=True, source=self.spec,
+                                        robot=robot_name(self.spec, self.source, robot) or "camera")
         self.thumbs: list[bytes] = []
-        self.result = None
         self.quality = None
-        self.dropped: list[int] = []
+        self._calibrating_from = 0
         self.bad: Counter = Counter()
         self.frames_seen = 0
         self.last_frame = None
         self.state = "connecting"
-        self.calibrating = False
-        self.calibrate_error: str | None = None
-        self.calibrate_seconds = float("nan")
-        self._lock = threading.RLock()
-        self._job: threading.Thread | None = None
-        self._preview_maps = None
-        self._preview_key = None
-        self._preview_builder: threading.Thread | None = None
-        # CALIBRATE runs in a helper process (see solver.py: in a thread, it would stall the image)
-        self._solver: SolverProcess | None = None
+        self._lock = self.session.lock
+        # CALIBRATE runs off the frame loop, its solver in a helper process (solver.py: in a thread, it would
+        # stall the image); the preview's maps are made in a helper thread
+        self.background = BackgroundCalibration(self.session, on_result=self._calibrated, on_error=self._failed,
+                                                on_verdict=self._verdict, on_end=self._calibrate_ended)
+        self._preview = PreviewMaps(self._lock)
 
         # ---- widgets
         lay = w.Layout
@@ -130,6 +104,9 @@ class LiveCalibrator:
         self.calibrate_button = w.Button(description="CALIBRATE", disabled=True, button_style="primary",
                                          tooltip="enabled when every bar is green or at 40 samples")
         self.commit_button = w.Button(description="COMMIT", disabled=True, button_style="success")
+        self.keep_anyway = w.Checkbox(value=False, description="keep anyway (expert)", indent=False,
+                                      tooltip="COMMIT a calibration the kit refuses as ROBOT.rejected.yaml beside "
+                                              "the robot's file (never sent to the robot)")
         self.save_button = w.Button(description="SAVE", disabled=False)
         self.reconnect_button = w.Button(description="RECONNECT", icon="refresh")
         ros = self.spec.startswith("ros:")
@@ -154,7 +131,8 @@ class LiveCalibrator:
             self.status, self.image,
             w.HBox([w.VBox([self.bars, self.count], layout=lay(width="330px")),
                     w.VBox([w.HBox([self.calibrate_button, self.commit_button, self.save_button,
-                                    self.reconnect_button]), self.commit_target, self.robot_text])]),
+                                    self.reconnect_button]), self.commit_target, self.robot_text,
+                                    self.keep_anyway])]),
             w.HTML("<b>samples kept</b> (click a sample's button to drop it)"), self.thumb_box,
             self.folder_text, self.archive_text, self.message,
             w.HTML("<b>results</b>"), self.results,
@@ -176,6 +154,19 @@ class LiveCalibrator:
         bundle["text/plain"] = "live calibrator (shown as a widget in JupyterLab)"
         return bundle
 
+    # ------------------------------------------------------------------ state: the session's and the background's
+    robot = property(lambda self: self.session.robot, lambda self, name: setattr(self.session, "robot", name))
+    tracker = property(lambda self: self.session.tracker, lambda self, t: setattr(self.session, "tracker", t),
+                       doc="the coverage (samples, bars) of the session")
+    result = property(lambda self: self.session.result, doc="the CalibrationResult, None before CALIBRATE")
+    dropped = property(lambda self: self.session.dropped, doc="views dropped as outliers by the last CALIBRATE")
+    calibrating = property(lambda self: self.background.busy)
+    calibrate_error = property(lambda self: self.background.error)
+    calibrate_seconds = property(lambda self: self.background.seconds)
+    _solver = property(lambda self: self.background.solver)
+    _preview_key = property(lambda self: self._preview.key)
+    _preview_maps = property(lambda self: self._preview.maps)
+
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
         self.state = st.state
@@ -187,17 +178,13 @@ class LiveCalibrator:
         img = frame.image
         if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
             return self._skip("odd_frame")
-        size = (img.shape[1], img.shape[0])
+        offer = self.session.offer(frame)
+        if offer.reason == Reason.SIZE_MISMATCH:
+            return self._skip("size_mismatch")
+        if offer.detection is None:  # the detector could not take the frame
+            return self._skip("detector_error")
+        det, added = offer.detection, offer.added
         with self._lock:
-            if self.tracker is None:
-                self.tracker = CoverageTracker(self.board, size)
-            if size != self.tracker.image_size:
-                return self._skip("size_mismatch")
-            try:
-                det = detect_board(img, self.board)
-            except (DtscalError, cv2.error):
-                return self._skip("detector_error")
-            added = self.tracker.offer(det, frame.index) if det.found else False
             if added:
                 self.thumbs.append(render.thumbnail(img, det.corners))
             n = len(self.tracker.samples)
@@ -214,7 +201,7 @@ class LiveCalibrator:
             self.bars.value = render.bars_html(bars)
             self.count.value = f"samples: {n}"
             self._add_thumb(n - 1)
-        enable = ready and not self.calibrating and n >= MIN_SAMPLES
+        enable = ready and not self.background.busy and n >= MIN_SAMPLES
         if self.calibrate_button.disabled == enable:
             self.calibrate_button.disabled = not enable
 
@@ -226,8 +213,9 @@ class LiveCalibrator:
         with self.image.hold_sync():
             self.image.value = jpeg
             self.image._dom_classes = render.stamp_classes(index, arrival, token, "intrinsic")
-        if self.result is not None:
-            self._show_preview(img)
+        out = self._preview.undistort(img, self.result, float(self.alpha.value), lambda: self.result)
+        if out is not None:
+            self.preview.value = render.encode_jpeg(out)
 
     def _skip(self, reason: str) -> bool:
         """Count a frame the calibrator cannot use (the count shows under the bars); returns False."""
@@ -255,30 +243,6 @@ class LiveCalibrator:
         for i in range(len(self.thumbs)):
             self._add_thumb(i)
 
-    def _build_preview_maps(self, result, alpha: float) -> None:
-        """Undistortion maps of ``result`` at ``alpha`` for the preview (kept if ``result`` is still current)."""
-        maps = rectification_maps_fast(result.camera().with_alpha(alpha))
-        with self._lock:
-            if self.result is result:
-                self._preview_maps, self._preview_key = maps, (id(result), round(alpha, 3))
-
-    def _show_preview(self, img) -> None:
-        """The undistorted preview of a frame (loop thread). New maps (another alpha) are built in a
-        helper thread meanwhile, never here: a frame never waits for them."""
-        alpha = float(self.alpha.value)
-        with self._lock:
-            result, maps, key = self.result, self._preview_maps, self._preview_key
-        if result is None:
-            return
-        if key != (id(result), round(alpha, 3)) and not (self._preview_builder and self._preview_builder.is_alive()):
-            self._preview_builder = threading.Thread(target=self._build_preview_maps, args=(result, alpha),
-                                                     daemon=True, name="dtscal-preview-maps")
-            self._preview_builder.start()
-        if maps is None or key[0] != id(result):
-            return
-        out = cv2.remap(img, maps[0], maps[1], cv2.INTER_LINEAR)
-        self.preview.value = render.encode_jpeg(out)
-
     # ------------------------------------------------------------------ actions
     @property
     def samples(self):
@@ -291,11 +255,11 @@ class LiveCalibrator:
                 return
             del self.tracker.samples[i]
             del self.thumbs[i]
-            bars, n, ready = self.tracker.bars(), len(self.tracker.samples), self.tracker.ready()
+            bars, n = self.tracker.bars(), len(self.tracker.samples)
         self.bars.value = render.bars_html(bars)
         self.count.value = f"samples: {n}"
         self._rebuild_thumbs()
-        self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES) or self.calibrating
+        self.calibrate_button.disabled = not self.background.can_start()
 
     def calibrate(self, wait: bool = False):
         """Calibrate from the samples in a background thread; ``wait=True`` blocks until done.
@@ -304,109 +268,50 @@ class LiveCalibrator:
         degenerate samples) is shown in the results panel; the previous calibration stays.
         """
         with self._lock:
-            if self.calibrating:
-                job = self._job
-            else:
-                obj, img = self.tracker.object_and_image_points() if self.tracker else ([], [])
-                size = self.tracker.image_size if self.tracker else None
-                self.calibrating = True
+            if not self.background.busy:
                 self.calibrate_button.disabled = True
-                self.results.value = render.message_html(f"calibrating from {len(obj)} samples ...")
-                job = threading.Thread(target=self._calibrate_job, args=(obj, img, size), daemon=True,
-                                       name="dtscal-calibrate")
-                self._job = job
-                job.start()
+                self._calibrating_from = len(self.samples)
+                self.results.value = render.message_html(f"calibrating from {self._calibrating_from} samples ...")
+            job = self.background.start(self.prepare_calibration)
         if wait:
             job.join()
             return self.result
         return job
 
     def prepare_calibration(self, wait: float = 0.0) -> bool:
-        """Start the calibration process ahead of CALIBRATE (done by itself at 3 samples).
+        """Start the calibration process ahead of CALIBRATE (done by itself at 3 samples); True when ready."""
+        return self.background.prepare(wait)
 
-        Returns True when it is ready (waiting up to ``wait`` seconds).
-        """
-        if self._solver is None or not self._solver.alive:
-            try:
-                self._solver = SolverProcess()
-            except OSError:  # no subprocesses here: CALIBRATE runs in a thread of this process
-                self._solver = None
-                return False
-        return self._solver.ready(wait)
+    def _calibrated(self, result) -> None:
+        with self._lock:
+            self.quality = None
+        # the preview's maps are made here, in the calibration's thread: the frame loop never builds them
+        self._preview.build(result, float(self.alpha.value), lambda: self.result)
+        self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from)
+        self.commit_button.disabled = False
 
-    def _solve(self, obj, img, size):
-        """``calibrate_without_outlier_views`` in the calibration process (in this one if that fails)."""
-        if self.prepare_calibration():
-            try:
-                return self._solver.calibrate(obj, img, size, self.model)
-            except (OSError, EOFError):
-                self._solver = None
-        return calibrate_without_outlier_views(obj, img, size, model=self.model)
+    def _failed(self, message: str) -> None:
+        keep = " The previous calibration is kept." if self.result is not None else ""
+        self.results.value = render.message_html(message + keep, "error")
 
-    def _assess(self, result):
-        """The verdict (after the result is shown: it can take longer than the calibration)."""
-        if getattr(result, "quality", None) is None:
-            return None
-        if self._solver is not None:
-            try:
-                return self._solver.assess(result)
-            except (OSError, EOFError, DtscalError):
-                pass
-        return assess_quality(result)
+    def _verdict(self, result, quality) -> None:
+        """The verdict follows the result (it can take longer than the calibration)."""
+        with self._lock:
+            self.quality = quality
+        verdict = verdict_html(quality)
+        if verdict:
+            self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from, verdict)
 
-    def _calibrate_job(self, obj, img, size) -> None:
-        t0 = time.perf_counter()
-        try:
-            if len(obj) < MIN_SAMPLES:
-                raise DtscalError(f"only {len(obj)} sample(s); calibration needs at least {MIN_SAMPLES} views "
-                                  "of the board at different positions and tilts")
-            result, dropped = self._solve(obj, img, size)
-            if not np.all(np.isfinite(result.K)):
-                raise DtscalError("the calibration did not converge; collect more varied samples")
-        except DtscalError as exc:
-            self.calibrate_error = str(exc)
-            keep = " The previous calibration is kept." if self.result is not None else ""
-            self.results.value = render.message_html(f"CALIBRATE failed: {exc}.{keep}", "error")
-        except Exception as exc:  # numerical breakdown: a message, never a traceback
-            self.calibrate_error = f"{type(exc).__name__}: {exc}"
-            self.results.value = render.message_html(
-                f"CALIBRATE failed ({self.calibrate_error}); collect more varied samples and try again", "error")
-        else:
-            self.calibrate_error = None
-            with self._lock:
-                self.result, self.dropped, self.quality = result, dropped, None
-            # the preview's maps are made here, in the calibration's thread: the frame loop never builds them
-            self._build_preview_maps(result, float(self.alpha.value))
-            self.results.value = render.calibration_html(result, dropped, len(obj))
-            self.commit_button.disabled = False
-        finally:
-            self.calibrate_seconds = time.perf_counter() - t0
-        try:
-            if self.calibrate_error is None:  # the verdict follows; it can take longer than the calibration
-                quality = self._assess(result)
-                verdict = verdict_html(quality)
-                with self._lock:
-                    current = self.result is result
-                    if current:
-                        self.quality = quality
-                if verdict and current:
-                    self.results.value = render.calibration_html(result, dropped, len(obj), verdict)
-        finally:
-            with self._lock:
-                self.calibrating = False
-                ready = self.tracker is not None and self.tracker.ready()
-                n = len(self.tracker.samples) if self.tracker else 0
-            self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES)
+    def _calibrate_ended(self) -> None:
+        self.calibrate_button.disabled = not self.background.can_start()
 
     def camera(self) -> CameraModel | None:
         """The calibrated camera (``P`` with alpha 0, as ROS sets it), or None before CALIBRATE."""
-        return None if self.result is None else self.result.camera()
+        return self.session.camera
 
     def calibration(self) -> calib_files.IntrinsicCalibration | None:
-        cam = self.camera()
-        if cam is None:
-            return None
-        return calib_files.IntrinsicCalibration.from_camera(cam, camera_name=f"/{self.robot}/camera_node")
+        """The content of ``camera_intrinsic/<ROBOT>.yaml`` (None before CALIBRATE)."""
+        return self.session.calibration()
 
     def _say(self, text: str, kind: str = "info") -> str:
         self.message.value = render.message_html(text, kind)
@@ -416,21 +321,30 @@ class LiveCalibrator:
         """Write ``camera_intrinsic/<ROBOT>.yaml`` into the calibration folder and, with the
         target "robot over ROS", send it to ``/<ROBOT>/camera_node/set_camera_info``.
 
-        On failure the message says why; the previous file on the robot or in the folder
-        is unchanged, and SAVE still keeps the new calibration.
+        The session's gate comes first, as for ``dtscal calibrate-intrinsics``: a calibration the kit
+        does not believe is refused (nothing written, nothing sent); with "keep anyway" it is written as
+        ``<ROBOT>.rejected.yaml`` beside the robot's file and never sent. On failure the message says
+        why; the previous file on the robot or in the folder is unchanged, and SAVE still keeps the new
+        calibration.
         """
-        calib = self.calibration()
-        if calib is None:
+        if self.result is None:
             return self._say("nothing to commit yet: CALIBRATE first", "error")
+        keep = bool(self.keep_anyway.value)
         try:
-            robot = calib_files.check_robot_name(self.robot)
-            path = calib_files.save_intrinsics(calib, self.folder_text.value.strip(), robot)
+            path = self.session.write(self.folder_text.value.strip(), keep_anyway=keep)
+            if self.session.doubts:
+                return self._say(f"COMMIT: kept as {path} beside the robot's file, against the kit's doubts: "
+                                 + "; ".join(map(str, self.session.doubts)) + ". It is not sent to the robot.", "error")
             if self.commit_target.value == "folder":
                 return self._say(f"COMMIT: wrote {path} (the previous file, if any, is kept as .bak)", "ok")
-            from ..robot import commit_intrinsics
-
-            answer = commit_intrinsics(robot, path, master_uri=getattr(self.source, "master", None))
-            return self._say(f"COMMIT to {robot}: {answer} (local copy: {path})", "ok")
+            answer = self.session.commit(master_uri=getattr(self.source, "master", None))
+            return self._say(f"COMMIT to {self.robot}: {answer} (local copy: {path})", "ok")
+        except ImplausibleCalibrationError as exc:
+            doubts = "".join(f"<br>- {d}" for d in exc.doubts)
+            return self._say(f"COMMIT refused: the kit does not believe this calibration, nothing was written "
+                             f"and nothing sent:{doubts}<br>Collect more varied samples and CALIBRATE again, or, as "
+                             f"an expert, tick \"keep anyway\" to keep it as {self.robot}"
+                             f"{calib_files.REJECTED_SUFFIX}.yaml beside the robot's file.", "error")
         except (DtscalError, OSError) as exc:
             return self._say(f"COMMIT failed: {exc}. The previous calibration is unchanged; "
                              "SAVE still keeps this one.", "error")
@@ -463,12 +377,12 @@ class LiveCalibrator:
             if self.tracker is None or self.tracker.image_size != arch.image_size:
                 self.tracker = CoverageTracker(self.board, arch.image_size)
             self.tracker.samples = list(arch.samples)
-            self.thumbs = [_outline_thumb(s.corners, arch.image_size) for s in arch.samples]
-            bars, n, ready = self.tracker.bars(), len(arch.samples), self.tracker.ready()
+            self.thumbs = [render.outline_thumb(s.corners, arch.image_size) for s in arch.samples]
+            bars, n = self.tracker.bars(), len(arch.samples)
         self.bars.value = render.bars_html(bars)
         self.count.value = f"samples: {n}"
         self._rebuild_thumbs()
-        self.calibrate_button.disabled = not (ready and n >= MIN_SAMPLES)
+        self.calibrate_button.disabled = not self.background.can_start()
         return self._say(f"loaded {n} samples from {path}; CALIBRATE to recalibrate", "ok")
 
     def reconnect(self) -> str:
@@ -482,31 +396,10 @@ class LiveCalibrator:
     def close(self) -> None:
         """Stop the frame loop, close the source and end the calibration process."""
         self.loop.close()
-        if self._solver is not None:
-            self._solver.close()
-            self._solver = None
+        self.background.close()
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         self.close()
-
-
-def rectification_maps_fast(cam: CameraModel):
-    """``cam.rectification_maps()`` for the live views, computed by ``cv2.initUndistortRectifyMap``.
-
-    The kit's own :func:`~dtscal_lib.camera.rectification_maps` (numpy) takes ~0.1 s of CPU at
-    640x480 and holds the interpreter meanwhile; OpenCV's gives the same maps (to float32
-    resolution, checked in the tests) in a few milliseconds without holding it. OpenCV ignores
-    the skew of K, so a camera with skew keeps the kit's maps.
-    """
-    if cam.K[0, 1] != 0.0:
-        return cam.rectification_maps()
-    return cv2.initUndistortRectifyMap(cam.K, cam.dist, None, cam.rectified_K, cam.size, cv2.CV_32FC1)
-
-
-def _outline_thumb(corners: np.ndarray, size, width: int = 96) -> bytes:
-    """Thumbnail of a loaded sample (the frame is not saved): the board outline on grey."""
-    blank = np.full((size[1], size[0], 3), 200, np.uint8)
-    return render.thumbnail(blank, corners, width)

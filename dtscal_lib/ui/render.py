@@ -136,7 +136,8 @@ def source_status_html(spec: str, status, bad: dict, kept: str) -> str:
     ``kept`` says what survives a lost source (``"Every sample is kept"``); ``bad`` counts the
     skipped frames by reason.
     """
-    text = {"connecting": f"connecting to {spec} ...",
+    waiting = status.state == "connecting" and status.message and not status.message.startswith("connecting to ")
+    text = {"connecting": f"waiting for {spec}: {status.message}" if waiting else f"connecting to {spec} ...",
             "running": f"live: {spec}",
             "ended": f"source ended: {status.message}. {kept}; RECONNECT to go on.",
             "error": f"source lost: {status.message}. {kept}; RECONNECT when it is back."}.get(
@@ -183,3 +184,35 @@ def top_view(ground_true: np.ndarray, ground_fit: np.ndarray | None, *, px_per_m
     cv2.putText(img, f"errors x{magnify:g}; grid 1 cm", (6, h - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                 (60, 60, 60), 1, cv2.LINE_AA)
     return img
+
+
+def verdict_html(quality) -> str | None:
+    """The verdict part of the live calibrator's results panel (a Quality, or a message when there is none)."""
+    if quality is None:
+        return None
+    if isinstance(quality, str):
+        return message_html(quality)
+    findings = "".join(f"<li>{html.escape(str(f.message))} <i>{html.escape(str(f.advice))}</i></li>"
+                       for f in getattr(quality, "findings", []))
+    colour = {"good": GREEN, "bad": RED}.get(str(quality.verdict), "#b7791f")
+    return (f'<span class="dtscal-verdict" style="color:{colour}"><b>{html.escape(str(quality.verdict))}</b></span>'
+            + (f"<ul>{findings}</ul>" if findings else ""))
+
+
+def rectification_maps_fast(cam):
+    """``cam.rectification_maps()`` for the live views, computed by ``cv2.initUndistortRectifyMap``.
+
+    The kit's own :func:`~dtscal_lib.camera.rectification_maps` (numpy) takes ~0.1 s of CPU at
+    640x480 and holds the interpreter meanwhile; OpenCV's gives the same maps (to float32
+    resolution, checked in the tests) in a few milliseconds without holding it. OpenCV ignores
+    the skew of K, so a camera with skew keeps the kit's maps.
+    """
+    if cam.K[0, 1] != 0.0:
+        return cam.rectification_maps()
+    return cv2.initUndistortRectifyMap(cam.K, cam.dist, None, cam.rectified_K, cam.size, cv2.CV_32FC1)
+
+
+def outline_thumb(corners: np.ndarray, size, width: int = 96) -> bytes:
+    """Thumbnail of a loaded sample (the frame is not saved): the board outline on grey."""
+    blank = np.full((size[1], size[0], 3), 200, np.uint8)
+    return thumbnail(blank, corners, width)

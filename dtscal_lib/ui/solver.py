@@ -3,7 +3,7 @@
 In a thread of the kernel, the Python-heavy solver and the frame loop take turns on the GIL:
 every time the solver calls into OpenCV it gives the GIL away and waits up to the interpreter's
 switch interval to get it back, thousands of times per calibration (seconds, during which the
-image stutters). :class:`SolverProcess` runs :func:`dtscal_lib.pipeline.calibrate_without_outlier_views`
+image stutters). :class:`SolverProcess` runs :func:`dtscal_lib.session.calibrate_without_outlier_views`
 in a child Python (``python -m dtscal_lib.ui.solver``) started ahead of time; requests and answers
 are pickles over its stdin/stdout (a private pipe between two processes of the same kit).
 """
@@ -19,6 +19,7 @@ import threading
 from pathlib import Path
 
 from ..errors import DtscalError
+from ..session import assess_quality
 
 _HEADER = struct.Struct("<Q")
 
@@ -88,7 +89,6 @@ class SolverProcess:
         """:func:`assess_quality` of a result, computed in the child."""
         return self._ask(("assess", result))
 
-
     def close(self) -> None:
         if self._proc.poll() is None:
             try:
@@ -97,18 +97,6 @@ class SolverProcess:
             except (OSError, subprocess.TimeoutExpired):
                 self._proc.kill()
                 self._proc.wait(timeout=3)
-
-
-def assess_quality(result):
-    """The calibration's verdict, ``CalibrationResult.quality()`` (:mod:`dtscal_lib.quality`).
-
-    A failing assessment gives its message (a str), never an exception: the verdict is extra
-    information and must never lose the calibration.
-    """
-    try:
-        return result.quality()
-    except Exception as exc:  # the verdict is extra information: it must never lose the calibration
-        return f"no verdict ({type(exc).__name__}: {exc})"
 
 
 #: the calibration process runs this much nicer than the kernel: on a busy machine (two cores, a
@@ -121,7 +109,7 @@ def _serve() -> None:
         os.nice(NICENESS)
     except (AttributeError, OSError):  # no nice() on this platform: the same, at normal priority
         pass
-    from ..pipeline import calibrate_without_outlier_views
+    from ..session import calibrate_without_outlier_views
 
     out, inp = sys.stdout.buffer, sys.stdin.buffer
     _send(out, "ready")

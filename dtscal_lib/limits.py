@@ -1,0 +1,164 @@
+"""What the kit believes: every threshold of belief in one table, each once, with its reason and source.
+
+Three judges use these numbers, and they answer with :class:`~dtscal_lib.findings.Finding` objects:
+
+* **refusal of an intrinsic calibration** (:func:`dtscal_lib.plausibility.intrinsic_doubts`): a result
+  beyond these limits is not written over the robot's file (``dtscal`` exits 3; ``--keep-anyway``
+  writes it beside);
+* **refusal of a ground homography** (:func:`dtscal_lib.ground.ground_homography_doubts`): the camera
+  it implies must be a Duckiebot's, the board seen from above the right way round;
+* **the verdict** (:func:`dtscal_lib.quality.assess`): ``good`` / ``doubtful`` / ``bad``. The tilt of the
+  boards is judged here once for all three; the verdict's residual and uncertainty thresholds are
+  kept beside their measurements in :mod:`dtscal_lib.quality`.
+
+Two numbers are not beliefs but the limits of the mathematics, named apart:
+:data:`MIN_TILT_SPREAD_DEG` (below it the calibration cannot be computed at all: parallel boards leave
+Zhang's equations rank-deficient) and :data:`FOCAL_STD_UNDETERMINED` (a focal length known only to
++-25 % is not determined).
+
+Data sources
+------------
+* **fleet**: Duckietown's public fleet repository ``duckietown/duckiefleet``, ``calibrations/``
+  (2017-18): about 125 real Duckiebots' calibration files (issue 17's survey of all of them: 95 % of
+  the ground-axis ratios under 1.08, the largest 1.19 and 1.22; 8 extrinsic files with
+  ``H[1][2] > 0``, robots whose image is rotated 180 degrees, camera 0.10-0.11 m high and 16-24
+  degrees down by their own ``P``), and a sample of 6 robots with both files read again for this
+  table (megabot01, student05, daisy, fobot, vickie, yaf): camera 0.104-0.123 m above the ground,
+  17.7-23.0 degrees down, yaw within 2.6 degrees, axis ratio 0.95-1.01, axes 88.2-90.0 degrees apart;
+  fx 317-339 px, fx/fy 0.991-1.012, principal point within 1.6 % (x) and 6.1 % (y) of the centre.
+  The robot's factory files (``duckietown.md``) give 0.102 m, 25.3 degrees.
+* **duckietown.md**: real per-robot intrinsic files have fx from 305 to 397 px at 640x480.
+* **real photographs**: OpenCV's sample photographs in ``data/real/`` (tests/test_detect_real.py).
+
+``python -m dtscal_lib.limits`` prints the table (the text of ``docs/limits.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["Limit", "TABLE", "LIMITS", "INTRINSIC_LIMITS", "GROUND_CAMERA_LIMITS", "MIN_TILT_SPREAD_DEG",
+           "FOCAL_STD_UNDETERMINED", "TILT_BAD_DEG", "TILT_DOUBTFUL_DEG", "MIRROR_MIN_CONTRAST", "table_text"]
+
+
+@dataclass(frozen=True)
+class Limit:
+    """One threshold: ``name``, ``value`` (a number or a (low, high) range), ``unit``, who uses it
+    and with what consequence (``judge``), why this value (``reason``) and the data behind it (``source``)."""
+
+    name: str
+    value: float | tuple[float, float]
+    unit: str
+    judge: str
+    reason: str
+    source: str
+
+
+TABLE: tuple[Limit, ...] = (
+    # ------------------------------------------------------------------ the boards' tilt, judged once
+    Limit("min_tilt_spread", 3.0, "degrees", "calibration: cannot be computed (CalibrationError)",
+          "board normals all within this of their mean leave Zhang's constraints rank-deficient: no focal "
+          "length, no principal point (a limit of the mathematics, not a belief)",
+          "Zhang (2000): parallel planes are a degenerate configuration; the value calibration.py used"),
+    Limit("tilt_bad", 10.0, "degrees", "refusal (plausibility) and verdict 'bad' (quality)",
+          "below it the focal length and principal point trade off against the board distance: "
+          "computable, but not to be believed; the one value of both judges",
+          "chosen, not measured: the value plausibility.py and quality.py both used before this table; "
+          "issue 15's three near-parallel views are refused by it"),
+    Limit("tilt_doubtful", 20.0, "degrees", "verdict 'doubtful' (quality)",
+          "the bottom of the 20-45 degree tilt the kit advises", "chosen, not measured: quality.py's value"),
+    # ------------------------------------------------------------------ refusal of an intrinsic calibration
+    Limit("max_rms", 1.0, "px", "refusal (plausibility)",
+          "ROS calls well under 0.5 px good; beyond 1 px a corner or the board size is wrong",
+          "real photographs of data/real/: the kit fits left and right at 0.174 and 0.177 px"),
+    Limit("fov", (10.0, 170.0), "degrees (horizontal)", "refusal (plausibility)",
+          "from a tele lens to a fisheye: loose on purpose, every real camera a course meets passes",
+          "duckietown.md: Duckiebot fx 305-397 px at 640 px, a 78-93 degree field of view"),
+    Limit("aspect", (0.8, 1.25), "fx / fy", "refusal (plausibility)",
+          "square pixels give 1; the wide range only catches a wrong board or a degenerate fit",
+          "fleet sample: fx/fy 0.991-1.012"),
+    Limit("max_centre_offset", 0.2, "fraction of the image side", "refusal (plausibility)",
+          "the principal point lies near the image centre on any camera module",
+          "fleet sample: within 1.6 % (x) and 6.1 % (y)"),
+    Limit("max_relative_focal_std", 0.02, "sigma(f) / f", "refusal (plausibility)",
+          "a focal length known only to +-2 % moves ground points by centimetres at 60 cm",
+          "real photographs of data/real/ (13 views each): sigma(fx)/fx 0.12-0.15 % (the kit's, within 1.5x "
+          "of a jackknife)"),
+    Limit("focal_std_undetermined", 0.25, "sigma(f) / f", "calibration: cannot be computed (CalibrationError)",
+          "a focal length known only to +-25 % is not determined (a limit of the data, not a belief)",
+          "chosen: the value calibration.py used"),
+    Limit("min_distinct_views", 3, "views", "refusal (plausibility)",
+          "views that differ only by a shift in the image are one board image; Zhang needs 3 distinct",
+          "Zhang (2000); issue 15's forty shifted copies (fx 186 for 308)"),
+    Limit("same_image", 1.0, "px rms", "refusal (plausibility)",
+          "two views' centred corners this close are the same board image shifted",
+          "the kit's corner noise on real photographs, about 0.07 px, many times below"),
+    # ------------------------------------------------------------------ refusal of a ground homography
+    Limit("camera_height", (0.07, 0.16), "m above the ground", "refusal (ground)",
+          "a Duckiebot's camera; a board size wrong by a factor of 1.5 or more lands outside "
+          "(--square 0.1 for the 31 mm board: 0.335 m)",
+          "fleet: 0.10-0.11 m (the rotated robots), 0.104-0.123 m (sample), 0.102 m (factory files)"),
+    Limit("camera_pitch", (5.0, 40.0), "degrees below the horizon", "refusal (ground)",
+          "a Duckiebot's camera looks down at the road ahead; about 12 degrees of margin either side",
+          "fleet: 16-24 degrees (the rotated robots), 17.7-23.0 (sample), 25.3 (factory files)"),
+    Limit("camera_yaw", 15.0, "degrees either side", "refusal (ground)",
+          "the camera faces the robot's forward axis",
+          "fleet sample: within 2.6 degrees; factory files 2.0"),
+    Limit("axis_ratio", 1.25, "|r1| / |r2|", "refusal (ground)",
+          "a flat ground seen through the file's own intrinsics has equal axes; above every real robot "
+          "of the fleet, so wrong intrinsics or a bent board are refused and no real robot is",
+          "fleet: 95 % under 1.08, the largest two 1.19 and 1.22 (issue 17); sample 0.95-1.01"),
+    Limit("axis_angle_error", 8.0, "degrees from 90", "refusal (ground)",
+          "the ground's x and y axes are perpendicular",
+          "fleet sample: 88.2-90.0 degrees apart"),
+    Limit("mirror_min_contrast", 10.0, "grey levels", "refusal (ground): board seen mirrored",
+          "the checkerboard's squares seen from above must have the printed pattern's colours (the square "
+          "outside the near-right inner corner dark); a mirrored frame swaps them. Below this contrast "
+          "between light and dark squares the colours are not trusted and nothing is said",
+          "Duckietown's printed pattern (tests/test_ground.py: near-right square dark); the synthetic "
+          "session's rectified floor views show +176 to +181 grey levels, their mirror images -176 to -181"),
+)
+
+#: every limit by name
+LIMITS: dict[str, Limit] = {lim.name: lim for lim in TABLE}
+
+MIN_TILT_SPREAD_DEG = LIMITS["min_tilt_spread"].value
+FOCAL_STD_UNDETERMINED = LIMITS["focal_std_undetermined"].value
+TILT_BAD_DEG = LIMITS["tilt_bad"].value
+TILT_DOUBTFUL_DEG = LIMITS["tilt_doubtful"].value
+MIRROR_MIN_CONTRAST = LIMITS["mirror_min_contrast"].value
+
+#: the refusal limits of an intrinsic calibration (:func:`dtscal_lib.plausibility.intrinsic_doubts`)
+INTRINSIC_LIMITS = {
+    "max_rms_px": LIMITS["max_rms"].value,
+    "fov_deg": LIMITS["fov"].value,
+    "aspect": LIMITS["aspect"].value,
+    "max_centre_offset": LIMITS["max_centre_offset"].value,
+    "min_tilt_spread_deg": TILT_BAD_DEG,
+    "max_relative_focal_std": LIMITS["max_relative_focal_std"].value,
+    "min_distinct_views": LIMITS["min_distinct_views"].value,
+    "same_image_px": LIMITS["same_image"].value,
+}
+
+#: what a ground homography must say about the camera (:func:`dtscal_lib.ground.ground_homography_doubts`)
+GROUND_CAMERA_LIMITS = {
+    "height_m": LIMITS["camera_height"].value,
+    "pitch_down_deg": LIMITS["camera_pitch"].value,
+    "abs_yaw_deg": LIMITS["camera_yaw"].value,
+    "axis_ratio": LIMITS["axis_ratio"].value,
+    "axis_angle_error_deg": LIMITS["axis_angle_error"].value,
+}
+
+
+def table_text() -> str:
+    """The table as Markdown (``docs/limits.md``)."""
+    def fmt(v):
+        return f"{v[0]:g}-{v[1]:g}" if isinstance(v, tuple) else f"{v:g}"
+    rows = ["| limit | value | unit | used by | why | data |", "|---|---|---|---|---|---|"]
+    rows += [f"| `{lim.name}` | {fmt(lim.value)} | {lim.unit} | {lim.judge} | {lim.reason} | {lim.source} |"
+             for lim in TABLE]
+    return "\n".join(rows) + "\n"
+
+
+if __name__ == "__main__":  # pragma: no cover
+    print(table_text(), end="")
