@@ -91,7 +91,7 @@ def test_calibrate_runs_in_a_helper_process(filled, monkeypatch):
     The solve is followed by process id: the in-process solver (patched to record the pid that runs
     it) must not run, and the solver process that answered is a child of this one, with another pid.
     """
-    from dtscal_lib import pipeline
+    from dtscal_lib import pipeline, session
     from dtscal_lib.ui import intrinsic, solver
 
     here = []
@@ -100,9 +100,9 @@ def test_calibrate_runs_in_a_helper_process(filled, monkeypatch):
         here.append(os.getpid())
         return real(*a, **k)
 
-    real = pipeline.calibrate_without_outlier_views
-    monkeypatch.setattr(pipeline, "calibrate_without_outlier_views", in_this_process)
-    monkeypatch.setattr(intrinsic, "calibrate_without_outlier_views", in_this_process)
+    real = session.calibrate_without_outlier_views
+    for module in (session, pipeline, intrinsic):  # wherever the in-process solver is reachable from
+        monkeypatch.setattr(module, "calibrate_without_outlier_views", in_this_process, raising=False)
     answered = []
     real_calibrate = solver.SolverProcess.calibrate
 
@@ -113,9 +113,9 @@ def test_calibrate_runs_in_a_helper_process(filled, monkeypatch):
 
     monkeypatch.setattr(solver.SolverProcess, "calibrate", calibrate)
     assert filled.prepare_calibration(wait=120)  # the helper is up (a safety net: it starts in ~2 s)
-    filled.result = None
+    before = filled.result
     filled.calibrate_button.click()
-    assert wait_for(lambda: not filled.calibrating and filled.result is not None, 120)
+    assert wait_for(lambda: not filled.calibrating and filled.result is not None and filled.result is not before, 120)
     assert here == [], "CALIBRATE ran in the kernel's process"
     assert len(answered) == 1 and answered[0] != os.getpid()
     with open(f"/proc/{answered[0]}/status") as f:  # the helper is this process's child
