@@ -24,6 +24,7 @@ import numpy as np
 
 from dtscal_lib import camera
 from dtscal_lib import duckietown as dt
+from dtscal_lib import poses, synth
 from dtscal_lib.boards import DUCKIETOWN_BOARD, Board
 
 
@@ -34,16 +35,11 @@ def look_at_pose(board: Board, distance: float, tilt_x: float = 0.0, tilt_y: flo
 
     ``distance`` metres along the optical axis to the board centre, ``tilt_x``/``tilt_y``
     rotations (radians) of the board about its own horizontal/vertical axis, ``roll``
-    about the optical axis, ``shift`` the board centre's (x, y) offset in metres.
+    about the optical axis, ``shift`` the board centre's (x, y) offset in metres: the
+    library's :func:`dtscal_lib.poses.look_at_pose`, with the centre then moved sideways.
     """
-    cx = (board.cols - 1) * board.square / 2.0
-    cy = (board.rows - 1) * board.square / 2.0
-    R = (cv2.Rodrigues(np.array([0.0, 0.0, roll]))[0]
-         @ cv2.Rodrigues(np.array([tilt_x, 0.0, 0.0]))[0]
-         @ cv2.Rodrigues(np.array([0.0, tilt_y, 0.0]))[0])
-    centre_cam = np.array([shift[0], shift[1], distance])
-    t = centre_cam - R @ np.array([cx, cy, 0.0])
-    return cv2.Rodrigues(R)[0].ravel(), t
+    R, t = poses.look_at_pose(np.degrees(tilt_y), np.degrees(tilt_x), np.degrees(roll), distance, board=board)
+    return cv2.Rodrigues(R)[0].ravel(), t + [shift[0], shift[1], 0.0]
 
 
 def random_visible_pose(rng: np.random.Generator, board: Board = DUCKIETOWN_BOARD,
@@ -102,8 +98,9 @@ class RenderedFrame:
 class FrameRenderer:
     """Renders Duckiebot-camera frames of a checkerboard with exact ground truth.
 
-    The per-pixel undistortion of the (supersampled) image grid is computed once, so
-    each frame costs only a homography, two ``remap`` calls and the photometric effects.
+    The per-pixel undistortion of the (supersampled) image grid is computed once (the kit's
+    ray caster, :class:`dtscal_lib.synth.Renderer`), so each frame costs only casting the rays
+    onto the board plane, two ``remap`` calls of a printed-board texture and the photometric effects.
     """
 
     def __init__(self, board: Board = DUCKIETOWN_BOARD, K=None, dist=None,
@@ -113,12 +110,8 @@ class FrameRenderer:
         self.dist = dt.default_dist() if dist is None else camera.as_dist(dist)
         self.size = (int(size[0]), int(size[1]))
         self.ss = int(supersample)
-        w, h = self.size
-        W, H = w * self.ss, h * self.ss
-        u, v = np.meshgrid((np.arange(W) + 0.5) / self.ss - 0.5, (np.arange(H) + 0.5) / self.ss - 0.5)
-        xy = camera.undistort_pixels(np.column_stack([u.ravel(), v.ravel()]), self.K, self.dist)
-        self._rays = np.column_stack([xy, np.ones(len(xy))])  # (H*W, 3) undistorted normalized rays
-        self._hw = (H, W)
+        # the kit's ray caster: one undistorted ray per sub-pixel, cast onto the board plane per frame
+        self._caster = synth.make_renderer(camera.CameraModel(self.K, self.dist, self.size), self.ss)
         # texture: (cols+1) x (rows+1) squares plus a one-square white margin
         self.pps = int(px_per_square)
         nx, ny = board.cols + 1, board.rows + 1
@@ -139,15 +132,11 @@ class FrameRenderer:
         """Render the board at pose ``(rvec, tvec)`` over a BGR ``background`` (h, w, 3) uint8."""
         R = camera.as_rotation(rvec)
         t = np.asarray(tvec, float).reshape(3)
-        Hn = np.column_stack([R[:, 0], R[:, 1], t])  # board (x, y, 1) -> normalized ray
-        q = self._rays @ np.linalg.inv(Hn).T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            bxy = q[:, :2] / q[:, 2:3]
-        front = (q[:, 2] > 0) & np.all(np.isfinite(bxy), axis=1)
+        bx, by, front = self._caster.plane_coords(R, t)
+        bxy = np.stack([bx, by], axis=-1)
         bxy[~front] = -1e6
         tex_px = self._board_to_texture_px(bxy).astype(np.float32)
-        H, W = self._hw
-        mx, my = tex_px[:, 0].reshape(H, W), tex_px[:, 1].reshape(H, W)
+        mx, my = np.ascontiguousarray(tex_px[..., 0]), np.ascontiguousarray(tex_px[..., 1])
         board_img = cv2.remap(self.texture, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                               borderValue=0)
         alpha = cv2.remap(np.full_like(self.texture, 255), mx, my, cv2.INTER_LINEAR,

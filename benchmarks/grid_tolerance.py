@@ -2,8 +2,10 @@
 
 For every real photograph of ``data/real/`` (26 views, 9x6 inner corners), flat and bent smoothly,
 prints the largest distance of an inner corner from the quadratic through its 8 neighbours
-(``detect.grid_jump``) in pixels and in squares, and how many boards the former check (a homography
-through the 8 neighbours, tolerance max(0.75 px, 0.1 square)) and the kit's detector refuse.
+(``detect.grid_jump``) in pixels and in squares, the outer ring's largest as a fraction of its
+tolerance (``detect.grid_tolerance``), the worst corner against the truth, and how many boards the
+former check (a homography through the 8 neighbours, tolerance max(0.75 px, 0.1 square)) and the
+kit's detector refuse.
 
 Bends (``cv2.remap``; the truth is the flat detection carried through the field):
 
@@ -67,7 +69,7 @@ def wave(amp, wavelength=300.0, phase=0.0):
 
 
 def row(name, cases):
-    jumps, fracs, old_refused, refused, worst = [], [], 0, 0, 0.0
+    jumps, fracs, outer, old_refused, refused, worst = [], [], [], 0, 0, 0.0
     for img, truth in cases:
         g = truth.reshape(B.rows, B.cols, 2)
         sq = float(min(np.linalg.norm(np.diff(g, axis=1), axis=2).min(),
@@ -79,12 +81,14 @@ def row(name, cases):
         if not det.found:
             refused += 1
             continue
-        j = D.grid_jump(det.corners, B)[inner.ravel()]
-        jumps.append(j.max())
-        fracs.append((j / D._local_square(det.corners, B)[inner.ravel()]).max())
+        j = D.grid_jump(det.corners, B)
+        jumps.append(j[inner.ravel()].max())
+        fracs.append((j / D._local_square(det.corners, B))[inner.ravel()].max())
+        outer.append((j / D.grid_tolerance(det.corners, B))[~inner.ravel()].max())
         worst = max(worst, float(np.linalg.norm(det.corners - truth, axis=1).max()))
-    print(f"{name:24s} views {len(cases):3d}  jump max {max(jumps):.2f} px ({max(fracs):.3f} square)  "
-          f"refused: former check {old_refused:2d}, kit {refused:2d}  worst corner vs truth {worst:.2f} px")
+    print(f"{name:20s} views {len(cases):3d}  inner jump max {max(jumps):.2f} px ({max(fracs):.3f} square), "
+          f"outer ring at most {max(outer):.2f} of its tolerance; refused: former check {old_refused:2d}, "
+          f"kit {refused:2d}; worst corner vs truth {worst:.2f} px")
 
 
 def main():

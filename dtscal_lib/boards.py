@@ -64,6 +64,11 @@ class Board:
         pts[:, 1] = j.ravel() * self.square
         return pts
 
+    @property
+    def centre(self) -> np.ndarray:
+        """The centre of the inner-corner grid, (3,) float64 board coordinates (z = 0)."""
+        return np.array([(self.cols - 1) * self.square / 2, (self.rows - 1) * self.square / 2, 0.0])
+
     def outer_corner_indices(self) -> tuple[int, int, int, int]:
         """Indices of the grid's four outer corners: (top-left, top-right, bottom-right, bottom-left)."""
         c, r = self.cols, self.rows

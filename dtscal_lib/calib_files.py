@@ -47,7 +47,7 @@ import stat
 import tempfile
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import FrozenInstanceError
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +56,7 @@ import yaml
 
 from . import duckietown as dt
 from . import safe_yaml
-from .camera import CameraModel, as_dist
+from .camera import CameraModel, as_dist, rectification_maps, undistort_pixels
 from .errors import CalibrationFileError, CalibrationFileWarning, DtscalError
 
 #: distortion models a file may declare, with their number of coefficients
@@ -260,38 +260,40 @@ def _check_intrinsic_values(width, height, K, model, D, R, P, where: str) -> Non
 
 
 # --------------------------------------------------------------------------- intrinsics
-@dataclass(frozen=True, eq=False)
-class IntrinsicCalibration:
-    """The content of a ``camera_intrinsic/<ROBOT>.yaml`` file, validated.
+class IntrinsicCalibration(CameraModel):
+    """The content of a ``camera_intrinsic/<ROBOT>.yaml`` file, validated: a :class:`CameraModel` with a name.
+
+    The kit has one camera type, :class:`~dtscal_lib.camera.CameraModel` (``K``, ``dist``,
+    ``size``, ``model``, ``P``). A calibration file is that camera plus what only the file
+    holds: the ``camera_name`` and the rectification rotation ``R``. So an
+    ``IntrinsicCalibration`` *is* a ``CameraModel`` (it projects, undistorts and rectifies,
+    honouring ``R``), built from the file's fields in the file's order and checked as strictly
+    as a file is read (every error names the field).
 
     Attributes
     ----------
     camera_name : str
-    width, height : int, image size in pixels
+    width, height : int, image size in pixels (``size`` is ``(width, height)``)
     K : (3, 3) float64 camera matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``
-    distortion_model : str, ``"plumb_bob"``
-    D : (5,) float64 ``[k1, k2, p1, p2, k3]``
+    distortion_model : str, ``"plumb_bob"`` (the camera's ``model``)
+    D : (5,) float64 ``[k1, k2, p1, p2, k3]`` (the camera's ``dist``)
     R : (3, 3) float64 rectification rotation (identity for a single camera)
     P : (3, 4) float64 projection matrix ``[K' | t]`` of the rectified image
+
+    Every array is read-only.
     """
 
     camera_name: str
-    width: int
-    height: int
-    K: np.ndarray
-    distortion_model: str
-    D: np.ndarray
     R: np.ndarray
-    P: np.ndarray
 
-    def __post_init__(self):
-        where = f"IntrinsicCalibration({self.camera_name!r})"
-        if not isinstance(self.camera_name, str):
-            raise _fail(where, f"camera_name must be a string, got {type(self.camera_name).__name__}")
+    def __init__(self, camera_name: str, width: int, height: int, K, distortion_model: str, D, R, P):
+        where = f"IntrinsicCalibration({camera_name!r})"
+        if not isinstance(camera_name, str):
+            raise _fail(where, f"camera_name must be a string, got {type(camera_name).__name__}")
         arrays = {}
-        for name, shape in (("K", (3, 3)), ("D", None), ("R", (3, 3)), ("P", (3, 4))):
+        for name, value, shape in (("K", K, (3, 3)), ("D", D, None), ("R", R, (3, 3)), ("P", P, (3, 4))):
             try:
-                a = np.array(getattr(self, name), dtype=np.float64)
+                a = np.array(value, dtype=np.float64)
             except (TypeError, ValueError):
                 raise _fail(where, f"{name} must be numeric") from None
             if name == "D":
@@ -300,34 +302,75 @@ class IntrinsicCalibration:
                 raise _fail(where, f"{name} must have shape {shape}, got {a.shape}")
             if not np.all(np.isfinite(a)):
                 raise _fail(where, f"{name} contains NaN or infinite values")
-            a.setflags(write=False)
             arrays[name] = a
-        _check_intrinsic_values(self.width, self.height, arrays["K"], self.distortion_model,
+        _check_intrinsic_values(width, height, arrays["K"], distortion_model,
                                 arrays["D"], arrays["R"], arrays["P"], where)
-        for name, a in arrays.items():
-            object.__setattr__(self, name, a)
+        for name, value in (("K", arrays["K"]), ("dist", arrays["D"]), ("size", (width, height)),
+                            ("model", distortion_model), ("P", arrays["P"]), ("camera_name", camera_name),
+                            ("R", arrays["R"])):
+            object.__setattr__(self, name, value)
+        try:
+            self.__post_init__()  # the camera's own checks and normal form (K, dist, size, P)
+        except DtscalError as e:
+            raise _fail(where, str(e)) from e
+        for name in ("K", "dist", "P", "R"):
+            getattr(self, name).setflags(write=False)
+
+    def __repr__(self) -> str:
+        return (f"IntrinsicCalibration(camera_name={self.camera_name!r}, width={self.width}, "
+                f"height={self.height}, K={self.K.tolist()}, distortion_model={self.model!r}, "
+                f"D={self.D.tolist()}, R={self.R.tolist()}, P={self.P.tolist()})")
 
     def __eq__(self, other):
         if not isinstance(other, IntrinsicCalibration):
             return NotImplemented
-        return (self.camera_name == other.camera_name and self.width == other.width
-                and self.height == other.height and self.distortion_model == other.distortion_model
+        return (self.camera_name == other.camera_name and self.size == other.size and self.model == other.model
                 and all(np.array_equal(getattr(self, n), getattr(other, n)) for n in "KDRP"))
 
     __hash__ = None  # arrays inside: not hashable
 
+    def __setattr__(self, name, value):
+        raise FrozenInstanceError(f"cannot assign to field {name!r}")
+
+    def __delattr__(self, name):
+        raise FrozenInstanceError(f"cannot delete field {name!r}")
+
+    # the file's names for the camera's fields
     @property
-    def size(self) -> tuple[int, int]:
-        """``(width, height)``."""
-        return (self.width, self.height)
+    def width(self) -> int:
+        return self.size[0]
+
+    @property
+    def height(self) -> int:
+        return self.size[1]
+
+    @property
+    def D(self) -> np.ndarray:
+        """``[k1, k2, p1, p2, k3]``: the camera's ``dist``."""
+        return self.dist
+
+    @property
+    def distortion_model(self) -> str:
+        return self.model
+
+    # the rectified image honours R (a plain CameraModel has none)
+    def undistort_pixels(self, uv, rectified: bool = True) -> np.ndarray:
+        """Distorted pixels -> rectified pixels (``rectified=True``, through ``R`` and ``P``) or normalized."""
+        if not rectified:
+            return undistort_pixels(uv, self.K, self.dist)
+        return undistort_pixels(uv, self.K, self.dist, R=self.R, P=self.P)
+
+    def rectification_maps(self, new_K=None, size=None):
+        return rectification_maps(self.K, self.dist, self.rectified_K if new_K is None else new_K,
+                                  self.size if size is None else size, self.R)
 
     def camera(self) -> CameraModel:
-        """The :class:`~dtscal_lib.camera.CameraModel` of this file (``P`` as stored).
+        """This camera as a plain :class:`~dtscal_lib.camera.CameraModel` (``P`` as stored, no name).
 
         Raises
         ------
         CalibrationFileError
-            If ``R`` is not the identity: :class:`CameraModel` describes a single camera
+            If ``R`` is not the identity: a plain :class:`CameraModel` describes a single camera
             without a rectification rotation, as every Duckiebot file has.
         """
         if not np.allclose(self.R, np.eye(3), atol=1e-9, rtol=0):
@@ -335,10 +378,7 @@ class IntrinsicCalibration:
                 f"camera {self.camera_name!r}: rectification_matrix is not the identity (a stereo "
                 "rectification); dtscal's camera model handles single cameras only"
             )
-        try:
-            return CameraModel(self.K, self.D, (self.width, self.height), "plumb_bob", self.P)
-        except DtscalError as e:
-            raise CalibrationFileError(f"camera {self.camera_name!r}: {e}") from e
+        return CameraModel(self.K, self.dist, self.size, self.model, self.P)
 
     def to_dict(self) -> dict:
         """The ROS ``CameraInfo`` YAML layout, keys in the order of the shipped ``default.yaml``.

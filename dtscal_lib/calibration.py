@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .camera import CameraModel, as_K, as_points, project_points
+from .camera import DIST_MODELS, CameraModel, as_K, as_points, project_points
 from .covariance import NormalBlocks, honest_intrinsic_covariance
 from .covariance import rodrigues as _rodrigues
 from .errors import CalibrationError, DtscalError
@@ -75,7 +75,6 @@ from .validation import check_image_size
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
 
-MODELS = ("plumb_bob", "radial2")
 _DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 #: a view needs at least this many points (a homography has 8 degrees of freedom)
 MIN_POINTS_PER_VIEW = 4
@@ -748,8 +747,8 @@ def calibrate(object_points, image_points, image_size, *, model: str = "plumb_bo
         fewer than 4 or collinear points in a view, non-planar object points, all
         boards parallel, or an optimisation that does not reach a physical camera.
     """
-    if model not in MODELS:
-        raise CalibrationError(f"model must be one of {MODELS}, got {model!r}")
+    if model not in DIST_MODELS:
+        raise CalibrationError(f"model must be one of {DIST_MODELS}, got {model!r}")
     if model == "radial2" and not fix_k3:
         raise CalibrationError("model 'radial2' estimates k1 and k2 only; use model='plumb_bob' to estimate k3")
     obj, img, size = _check_views(object_points, image_points, image_size)

@@ -26,6 +26,7 @@ import numpy as np
 
 from .errors import DtscalError
 
+#: the distortion models of the kit (defined here only): OpenCV's 5-term ``plumb_bob`` and Zhang's ``radial2``
 DIST_MODELS = ("plumb_bob", "radial2")
 
 
@@ -357,7 +358,11 @@ def rectify_image(image: np.ndarray, maps, interpolation=cv2.INTER_LINEAR) -> np
 # --------------------------------------------------------------------------- the model object
 @dataclass(frozen=True)
 class CameraModel:
-    """An intrinsically calibrated camera: ``K``, distortion, image size.
+    """An intrinsically calibrated camera: ``K``, distortion, image size: the kit's one camera type.
+
+    A calibration file's content (:class:`~dtscal_lib.calib_files.IntrinsicCalibration`) is
+    this camera with a name and a rectification rotation; a calibration's result gives one
+    with :meth:`~dtscal_lib.calibration.CalibrationResult.camera`.
 
     ``P`` is the rectified camera matrix ``[K' | 0]`` (3, 4) as ROS stores it; when not
     given it is computed with ``alpha = 0``, as ROS's calibrator does.

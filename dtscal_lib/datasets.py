@@ -28,7 +28,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .errors import DtscalError, FrameError, Reason, SourceError
+from .errors import DtscalError, FrameError, SourceError
 from .sources.bag import BagSource
 
 ENV_VAR = "DTSCAL_DATA"
@@ -156,7 +156,7 @@ def _session_frames(name: str, step: int = 1, limit: int | None = None) -> Itera
         if frame.index % step:
             continue
         if not frame.ok:
-            raise FrameError(getattr(frame.error, "reason", Reason.UNREADABLE),
+            raise FrameError(frame.error.reason,
                              f"frame {frame.index} of the bundled {name} cannot be used ({frame.error}); {_REGENERATE}")
         yield frame.index, frame.image
         n += 1

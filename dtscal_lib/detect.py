@@ -45,8 +45,8 @@ up: 100-250 ms per 640x480 frame, several times the camera's frame period.
    a printed outline, the board's edge or clutter close by) that window reaches past the
    corner's four squares and the outer corners converge on the edge, pixels away. Here each
    corner gets its own window (:func:`corner_windows`), the outer ring is restarted from the
-   inner corners' local homography where it disagrees, each inner corner is checked against
-   the quadratic through its 8 neighbours (:func:`grid_jump`, which a smoothly curled print
+   inner corners' local homography where it disagrees, each corner is checked against the
+   quadratic through its 8 grid neighbours (:func:`grid_jump`, which a smoothly curled print
    passes; re-refined with half the window, or the board is found but rejected as
    ``"inconsistent_grid"``, naming the corner), and a corner off a smooth (cubic)
    grid through the others goes back to the detector's position or is dropped with the view.
@@ -590,19 +590,23 @@ REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
 REFINE_SIGMA = 1.0
 #: a corner that the smoothed step would move this far (pixels) or more keeps its unsmoothed position
 POLISH_MAX_MOVE_PX = 0.1
-#: an inner corner farther than this from the smooth (quadratic) grid through its 8 neighbours
-#: (:func:`grid_jump`; in pixels, or this fraction of its local square size, whichever is larger)
-#: jumped off the grid. Measured by ``benchmarks/grid_tolerance.py`` on the 26 real photographs of
+#: a corner farther than this from the smooth (quadratic) grid through its 8 neighbours
+#: (:func:`grid_jump`; in pixels, or this fraction of its local square size, whichever is larger;
+#: x 1.51 at the board's four corners, where the check extrapolates: :func:`grid_tolerance`) jumped
+#: off the grid. Measured by ``benchmarks/grid_tolerance.py`` on the 26 real photographs of
 #: ``data/real/``: flat, the 728 inner corners jump by median 0.12 px, 99th percentile 0.36 px, at most
 #: 0.49 px (0.017 of a square), i.e. a corner noise of about 0.07 px per coordinate (the jump's noise
-#: gain is 1.5); curled smoothly (``cv2.remap``; copies at 0.6x, squares of 12-23 px as Duckietown's
-#: 17 mm squares on the floor, the print curling up by 6 or 12 px at its sides; or full size, waves of
-#: 5 px amplitude and 300 px wavelength) at most 1.84 px, 0.084 of a square, and none of these is
-#: refused by this check. 1 px is twice the largest flat jump; 0.1 of a square stays above the curled
-#: ones while a corner pulled off by a tenth of a square (a corner window reaching the board's edge)
-#: is still caught (``tests/test_detect_curled.py``). The former check, a homography through the same
-#: neighbours with max(0.75 px, 0.1 square), cannot follow a bend: it refused 5 of the 26 views curled
-#: by 12 px, 5 of the 52 waved ones, and Duckietown's curled DD24 print (1.74 px against 1.59 px).
+#: gain is 1.5), the outer ring at most 0.19 of its tolerance. Curled smoothly (``cv2.remap``; copies
+#: at 0.6x, squares of 12-23 px as Duckietown's 17 mm squares on the floor, the print curling up by
+#: 6 or 12 px at its sides; or full size, waves of 5 px amplitude and 300 px wavelength): inner jumps
+#: at most 0.75 px (0.033 of a square), the outer ring at most 0.87 of its tolerance. Refused: 1 of the
+#: 26 views curled by 12 px (a detection with a corner 21 px off) and 2 of the 52 waved ones (by the
+#: smooth-grid guard, :data:`SMOOTH_GRID_TOLERANCE`, a global cubic that a wave of one period per
+#: board exceeds). 1 px is twice the largest flat jump; 0.1 of a square stays above the curled ones
+#: while a corner displaced by a sixth of a square is caught and named (``tests/test_detect_curled.py``).
+#: The former check, a homography through the 8 neighbours with max(0.75 px, 0.1 square), cannot
+#: follow a bend: it refused 5 of the 26 views curled by 12 px, 5 of the 52 waved ones, and
+#: Duckietown's curled DD24 print (1.74 px against 1.59 px).
 GRID_TOLERANCE_PX = 1.0
 GRID_TOLERANCE_FRACTION = 0.1
 REASON_INCONSISTENT = Reason.INCONSISTENT_GRID
@@ -800,9 +804,9 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
        :data:`MIN_ISOTROPY`, as under motion blur, with a window as big as an inner corner's);
        a corner that moved farther than half its local square (or its window) left its own
        squares and goes back to the detector's position.
-    2. Each inner corner is compared with the quadratic through its 8 neighbours
-       (:func:`grid_jump`); one off by more than :data:`GRID_TOLERANCE_PX`
-       (or :data:`GRID_TOLERANCE_FRACTION` of its local square) is refined again, from the
+    2. Each corner is compared with the quadratic through its 8 grid neighbours
+       (:func:`grid_jump`); one off by more than :func:`grid_tolerance` (:data:`GRID_TOLERANCE_PX`
+       or :data:`GRID_TOLERANCE_FRACTION` of its local square) is refined again, from the
        neighbours' prediction, with half the window. If it still disagrees the detection is
        unreliable (``ok`` False).
     3. The smooth-grid guard: a corner off the cubic grid through the others
@@ -859,7 +863,8 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     if bad.any():
         # predict the disagreeing corners from the others (their own positions are not trusted)
         pred = _local_homography(c, board, 1, bad)[0][bad]
-        start = np.where(np.isfinite(pred), pred, raw[bad])
+        quad = (c + _grid_jumps(c, board)[0])[bad]  # the outer ring's corners have too few neighbours there
+        start = np.where(np.isfinite(pred), pred, quad)
         c[bad] = _subpix(gray, start, half[bad])
         if np.any(_inner_disagreement(c, board) > tol):
             return c, False
@@ -964,16 +969,7 @@ def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) ->
 
     A corner has strong gradients in two directions (about 0.3-1); an edge, or a corner smeared
     by motion blur, in one direction only (near 0), where ``cornerSubPix`` is ill-conditioned.
-
-    Parameters
-    ----------
-    gray : (h, w) uint8
-    points : (M, 2) pixels
-    radius : (M,) int window half-sizes
-
-    Returns
-    -------
-    (M,) float64
+    Takes and returns arrays as :func:`corner_misfit` does: (M,) float64 for M points.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     out = np.zeros(len(pts))
@@ -992,8 +988,59 @@ def _outer_ring(board: Board) -> np.ndarray:
     return (j == 0) | (j == board.rows - 1) | (i == 0) | (i == board.cols - 1)
 
 
+def _jump_weights():
+    """Weights of the quadratic-through-8-neighbours check for each place of a corner in a 3x3 block.
+
+    ``{(r, c): (w (9,), gain)}``: ``w @ block`` (the block's 9 corners, row-major) is the prediction
+    of corner ``(r, c)`` by the least-squares quadratic in the indices through the other 8, minus
+    the corner itself (``w[r*3 + c] = -1``); ``gain`` is the norm of ``w``, the factor by which
+    independent corner noise grows in it (1.5 at the centre and at the middle of a side, 2.27 at
+    a corner of the block, where the quadratic extrapolates).
+    """
+    pts = [(r, c) for r in range(3) for c in range(3)]
+
+    def row(p):
+        r, c = p
+        return [1.0, c, r, c * c, c * r, r * r]
+    out = {}
+    for t in pts:
+        others = [p for p in pts if p != t]
+        w = np.zeros(9)
+        w[[pts.index(p) for p in others]] = np.array(row(t)) @ np.linalg.pinv(np.array([row(p) for p in others]))
+        w[pts.index(t)] = -1.0
+        out[t] = (w, float(np.linalg.norm(w)))
+    return out
+
+
+_JUMP_WEIGHTS = _jump_weights()
+#: the noise gain of the check at an inner corner (the reference of :data:`GRID_TOLERANCE_PX`)
+_CENTRE_GAIN = _JUMP_WEIGHTS[(1, 1)][1]
+
+
+def _grid_jumps(corners: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray]:
+    """``(jump vectors (N, 2), noise gain (N,))`` of :func:`grid_jump`; zeros for boards under 3x3."""
+    R, C = board.rows, board.cols
+    g = np.asarray(corners, dtype=np.float64).reshape(R, C, 2)
+    vec, gain = np.zeros((R, C, 2)), np.full((R, C), _CENTRE_GAIN)
+    if R < 3 or C < 3:
+        return vec.reshape(-1, 2), gain.ravel()
+    # inner corners: the centre of their own 3x3 block, all at once
+    w = _JUMP_WEIGHTS[(1, 1)][0].reshape(3, 3)
+    for dr in range(3):
+        for dc in range(3):
+            vec[1:-1, 1:-1] += w[dr, dc] * g[dr:R - 2 + dr, dc:C - 2 + dc]
+    # the outer ring: from the 3x3 block reaching inward
+    for j in range(R):
+        for i in (range(C) if j in (0, R - 1) else (0, C - 1)):
+            j0, i0 = min(max(j - 1, 0), R - 3), min(max(i - 1, 0), C - 3)
+            w, gn = _JUMP_WEIGHTS[(j - j0, i - i0)]
+            vec[j, i] = w @ g[j0:j0 + 3, i0:i0 + 3].reshape(9, 2)
+            gain[j, i] = gn
+    return vec.reshape(-1, 2), gain.ravel()
+
+
 def grid_jump(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
-    """Distance (pixels) of each inner corner from the quadratic through its 8 grid neighbours.
+    """Distance (pixels) of each corner from the quadratic through its 8 grid neighbours.
 
     The least-squares quadratic in the corner indices through the 3x3 block without its centre
     predicts the centre as ``0.5 * (sum of the 4 edge neighbours) - 0.25 * (sum of the 4 diagonal
@@ -1001,11 +1048,13 @@ def grid_jump(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarra
     print's smooth curl, locally), so a smoothly bent board passes, while a corner displaced by
     ``d`` is off by ``d`` (its neighbours by at most ``d / 2``). Independent corner noise of
     ``sigma`` per coordinate gives a prediction error of ``1.5 sigma`` per coordinate (the
-    weights' norm), as in :func:`dtscal_lib.quality.corner_noise`.
+    weights' norm), as in :func:`dtscal_lib.quality.corner_noise`. A corner of the outer ring is
+    predicted by the quadratic through the other 8 corners of the 3x3 block reaching inward from
+    it (noise gain 1.5 in the middle of a side, 2.27 at the board's corners).
 
     Returns
     -------
-    (N,) float64 pixels, 0 on the outer ring (checked by the smooth-grid guard instead)
+    (N,) float64 pixels (zeros for boards with fewer than 3 rows or columns)
 
     >>> from dtscal_lib.boards import parse_board
     >>> b = parse_board("4x3")
@@ -1015,24 +1064,21 @@ def grid_jump(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarra
     True
     >>> g[5] += (1.5, 0.0)
     >>> grid_jump(g, b).reshape(3, 4)[1].round(2).tolist()
-    [0.0, 1.5, 0.75, 0.0]
+    [0.75, 1.5, 0.75, 0.75]
     """
-    g = np.asarray(corners, dtype=np.float64).reshape(board.rows, board.cols, 2)
-    out = np.zeros((board.rows, board.cols))
-    if board.rows >= 3 and board.cols >= 3:
-        pred = (0.5 * (g[1:-1, :-2] + g[1:-1, 2:] + g[:-2, 1:-1] + g[2:, 1:-1])
-                - 0.25 * (g[:-2, :-2] + g[:-2, 2:] + g[2:, :-2] + g[2:, 2:]))
-        out[1:-1, 1:-1] = np.linalg.norm(pred - g[1:-1, 1:-1], axis=-1)
-    return out.ravel()
+    return np.linalg.norm(_grid_jumps(corners, board)[0], axis=1)
 
 
 def grid_tolerance(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
-    """(N,) pixels: the largest :func:`grid_jump` a true corner may show (see :data:`GRID_TOLERANCE_PX`)."""
-    return np.maximum(GRID_TOLERANCE_PX, GRID_TOLERANCE_FRACTION * _local_square(corners, board))
+    """(N,) pixels: the largest :func:`grid_jump` a true corner may show (see :data:`GRID_TOLERANCE_PX`),
+    grown with the check's noise gain on the board's corners (x 2.27 / 1.5)."""
+    gain = _grid_jumps(corners, board)[1]
+    base = np.maximum(GRID_TOLERANCE_PX, GRID_TOLERANCE_FRACTION * _local_square(corners, board))
+    return base * gain / _CENTRE_GAIN
 
 
 def _inner_disagreement(c: np.ndarray, board: Board) -> np.ndarray:
-    """Distance from the quadratic through the 8 neighbours for inner corners, 0 elsewhere."""
+    """Distance from the quadratic through the 8 neighbours (:func:`grid_jump`), every corner."""
     return grid_jump(c, board)
 
 
@@ -1138,9 +1184,19 @@ def grid_rejection(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> str:
     'corner at row 2, column 3 (pixel 60.0, 34.0) is 4.00 px from where its 8 neighbours put it (tolerance 2.60 px)'
     """
     c = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
-    jump, tol = grid_jump(c, board), grid_tolerance(c, board)
+    vec, _ = _grid_jumps(c, board)
+    jump, tol = np.linalg.norm(vec, axis=1), grid_tolerance(c, board)
     k = int(np.argmax(jump / tol))
     if jump[k] > tol[k]:
+        # a displaced corner also shifts its neighbours' predictions: name the one whose move onto its
+        # neighbours' grid leaves the others closest to theirs
+        best = np.inf
+        for cand in np.flatnonzero(jump > 0.5 * tol):
+            trial = c.copy()
+            trial[cand] += vec[cand]
+            rest = np.delete(grid_jump(trial, board) / tol, cand).max(initial=0.0)
+            if rest < best - 1e-9:
+                best, k = rest, int(cand)
         what, dist, limit = "from where its 8 neighbours put it", jump[k], tol[k]
     else:
         res = grid_residuals(c, board, SMOOTH_GRID_TOLERANCE)
@@ -1172,7 +1228,14 @@ def _finish(gray: np.ndarray, raw: np.ndarray, board: Board, border_margin: floa
         corners, ok = refine_corners_checked(gray, raw, board)
         if not ok:
             # a board running off the image is reported as such (ROS's rule), not as inconsistent
-            if _near_border(raw, (w, h), border_margin) or _near_border(corners, (w, h), border_margin):
+            # ... and so is a board whose corners off the grid have squares the image edge cuts (within a
+            # square of it): the edge pulled their refinement, the grid check is its echo
+            reach = (border_margin + _local_square(raw, board))[:, None]
+            cut = np.any((raw < reach) | (raw > np.array([w - 1.0, h - 1.0]) - reach), axis=1)
+            off = ((grid_jump(corners, board) > grid_tolerance(raw, board))
+                   | (grid_residuals(corners, board, SMOOTH_GRID_TOLERANCE) > SMOOTH_GRID_TOLERANCE))
+            if (_near_border(raw, (w, h), border_margin) or _near_border(corners, (w, h), border_margin)
+                    or np.any(cut & off)):
                 return Detection(False, raw, REASON_AT_BORDER, board, (w, h))
             return Detection(False, corners, REASON_INCONSISTENT, board, (w, h), grid_rejection(corners, board))
     if _near_border(corners, (w, h), border_margin):

@@ -1,7 +1,20 @@
-"""Exception types of the kit.
+"""Exception types of the kit, and its one rule for saying that something failed.
 
 Every error the kit raises on bad input derives from :class:`DtscalError` (itself a
 ``ValueError``), and its message says what was wrong and what to do about it.
+
+The rule
+--------
+* **A normal answer about one picture is a value, not an exception.** "No board in this
+  frame", "the board touches the border", "a corner disagrees with the grid" are outcomes of
+  looking: :class:`~dtscal_lib.detect.Detection` says them with ``found=False`` and a
+  :class:`Reason`. A frame a source could not decode is a :class:`~dtscal_lib.sources.frame.Frame`
+  whose ``error`` (a :class:`FrameError`) says why; a source never raises for one bad frame.
+* **Everything else raises a** :class:`DtscalError`, **and every** ``DtscalError`` **has**
+  ``.reason``: the :class:`Reason` under which a pipeline counts it when the error concerns
+  one frame or view (``FrameError`` always has one; ``CalibrationError`` and the others when
+  they are given one), else ``None``. Code that counts a failure writes
+  ``exc.reason or Reason.<default>``: no ``getattr``, no guessing.
 """
 
 from __future__ import annotations
@@ -69,7 +82,17 @@ class Reason(StrEnum):
 
 
 class DtscalError(ValueError):
-    """Base class: bad input that the user can fix."""
+    """Base class: bad input that the user can fix.
+
+    ``reason`` (a :class:`Reason`, or None) says under which key a pipeline counts the error
+    when it concerns one frame or view (see the rule at the top of this module).
+    """
+
+    reason: "Reason | str | None" = None
+
+    def __init__(self, *args, reason: "Reason | str | None" = None):
+        super().__init__(*args)
+        self.reason = Reason.of(reason) if reason is not None else None
 
 
 class CalibrationError(DtscalError):
@@ -80,8 +103,7 @@ class CalibrationError(DtscalError):
     """
 
     def __init__(self, message: str = "", reason: "Reason | str | None" = None):
-        super().__init__(message)
-        self.reason = Reason.of(reason) if reason is not None else None
+        super().__init__(message, reason=reason)
 
 
 class CalibrationFileError(DtscalError):
@@ -111,9 +133,8 @@ class FrameError(DtscalError):
     """
 
     def __init__(self, reason: "Reason | str", message: str):
-        super().__init__(message)
         #: short machine-readable reason (a :class:`Reason`), used as a key in rejection counts
-        self.reason = Reason.of(reason)
+        super().__init__(message, reason=reason)
 
 
 def opencv_message(err: BaseException, limit: int = 200) -> str:

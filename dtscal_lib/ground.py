@@ -200,15 +200,6 @@ def resize_to_width(image: np.ndarray, width: int = dt.IMAGE_SIZE[0]) -> np.ndar
     return cv2.resize(image, (int(width), new_h), interpolation=interp)
 
 
-def _find_corners(image: np.ndarray, board: Board):
-    """The board in the rectified frame: a :class:`~dtscal_lib.detect.Detection`.
-
-    One still frame, so the thorough detector (:func:`dtscal_lib.detect.detect_board_still`) is
-    affordable: on the rectified floor view the far squares are only about 12 px tall.
-    """
-    return detect_board_still(image, board, border_margin=dt.BORDER_MARGIN_PX)
-
-
 def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
                          method: str = "ransac") -> ExtrinsicResult:
     """Duckietown's extrinsic calibration from one frame of the board lying in front of the robot.
@@ -248,28 +239,30 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
             "use frames from the calibrated camera mode", reason=Reason.SIZE_MISMATCH,
         )
     rectified = rectify_image(frame, camera.rectification_maps())
-    det = _find_corners(rectified, board)
-    corners, reason = det.corners, ("found" if det.found else det.reason)
-    if reason == Reason.INCONSISTENT_GRID:
+    # one still frame, so the thorough detector is affordable: on the rectified floor view the far
+    # squares are only about 12 px tall
+    det = detect_board_still(rectified, board, border_margin=dt.BORDER_MARGIN_PX)
+    if det.reason == Reason.INCONSISTENT_GRID:
         raise CalibrationError(
             f"the board ({board.describe()}) was found in the rectified image but rejected: {det.detail}. "
             "A smoothly curled print passes this check; a corner that jumps off its neighbours' grid is "
             "mis-detected (glare, a crease, a shadow or clutter on that corner): flatten the board, "
             "light it evenly and take another frame", reason=Reason.INCONSISTENT_GRID,
         )
-    if reason == Reason.AT_BORDER:
+    if det.reason == Reason.AT_BORDER:
         raise CalibrationError(
             f"the board ({board.describe()}) was found but some corners are within {dt.BORDER_MARGIN_PX} px "
             "of the rectified image's edge; place the robot on the board as instructed, centred, so that "
             "the whole board is well inside the view", reason=Reason.AT_BORDER,
         )
-    if corners is None:
+    if not det.found:
         raise CalibrationError(
             f"the board ({board.describe()}) was not found in the rectified image; place the robot on the "
             "board as instructed (the board flat in front of the robot, fully in view, its long side across "
             f"the view, the near row of inner corners {GROUND_NEAR_ROW_X} m ahead of the wheel axle), "
-            "with even lighting and no glare", reason=Reason.NO_BOARD,
+            "with even lighting and no glare", reason=det.reason or Reason.NO_BOARD,
         )
+    corners = det.corners
     try:
         ordered = order_for_ground(corners, board)
     except DtscalError as e:

@@ -738,12 +738,37 @@ def strip_widget_outputs(nb: NotebookNode) -> int:
     return n
 
 
+def coalesce_streams(nb: NotebookNode) -> int:
+    """Join consecutive ``stdout`` (or ``stderr``) outputs of a cell into one; returns how many were joined.
+
+    A kernel sends a printed line in one or several stream messages, depending on when its buffer is
+    flushed (``print(..., end="")`` then ``print()`` can arrive as one output or two). nbval joins them
+    before comparing; stored outputs joined the same way make a re-run's file independent of that timing.
+    """
+    n = 0
+    for cell in nb.cells:
+        if cell.cell_type != "code":
+            continue
+        merged = []
+        for out in cell.get("outputs", []):
+            prev = merged[-1] if merged else None
+            if (out.get("output_type") == "stream" and prev is not None and prev.get("output_type") == "stream"
+                    and prev.get("name") == out.get("name")):
+                prev["text"] = prev.get("text", "") + out.get("text", "")
+                n += 1
+            else:
+                merged.append(out)
+        cell["outputs"] = merged
+    return n
+
+
 def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, timeout: int = 300,
                       progress: bool = False) -> list[Path]:
     """Run solution notebooks top to bottom and store their outputs (what nbval compares).
 
     Each notebook runs in its own folder, as JupyterLab and nbval run it. Per-cell execution
-    timestamps and widget views (:func:`strip_widget_outputs`) are dropped so that re-running an
+    timestamps and widget views (:func:`strip_widget_outputs`) are dropped and consecutive stream
+    outputs joined (:func:`coalesce_streams`) so that re-running an
     unchanged notebook leaves the file unchanged wherever the outputs are deterministic.
 
     Parameters
@@ -787,5 +812,6 @@ def execute_solutions(solutions_dir, names: Iterable[str] | None = None, *, time
         for cell in nb.cells:
             cell.metadata.pop("execution", None)
         strip_widget_outputs(nb)
+        coalesce_streams(nb)
         path.write_text(_writes(nb))
     return paths

@@ -152,7 +152,7 @@ def commit_extrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
         raise CommitError(f"the robot's file server refused the upload to {target} (HTTP {exc.code}); "
                           f"{_by_hand('camera_extrinsic', robot, path)}") from None
     except (urllib.error.URLError, OSError) as exc:
-        reason = getattr(exc, "reason", exc)
+        reason = exc.reason if isinstance(exc, urllib.error.URLError) else exc  # urllib's own .reason
         raise CommitError(f"cannot reach the robot's file server at {target} ({reason}); is {robot} on the "
                           f"network? {_by_hand('camera_extrinsic', robot, path)}") from None
     return f"uploaded {path} to {target} (HTTP {code})"

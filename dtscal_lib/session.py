@@ -214,10 +214,12 @@ def _image_of(frame, tally: FrameTally) -> tuple[np.ndarray | None, str | None]:
     tally.total += 1
     if isinstance(frame, np.ndarray):
         img, error = frame, None
-    else:
-        img, error = getattr(frame, "image", None), getattr(frame, "error", None)
-    if error is not None or img is None:
-        reason = getattr(error, "reason", None) or Reason.UNREADABLE
+    else:  # a source's Frame: one without an image always carries its FrameError (see errors.py)
+        img, error = frame.image, frame.error
+    if error is not None:
+        reason = error.reason
+    elif img is None:
+        reason = Reason.UNREADABLE
     elif img.ndim < 2 or img.size == 0:
         reason = Reason.EMPTY
     else:
@@ -333,7 +335,7 @@ class IntrinsicSession:
         try:
             det = detect_board(img, self.board)
         except DtscalError as exc:  # a frame the detector cannot take: count it, go on
-            reason = getattr(exc, "reason", None) or Reason.BAD_FRAME
+            reason = exc.reason or Reason.BAD_FRAME
             group.tally.reject(reason)
             return Offer(False, reason, None, img)
         except cv2.error:  # OpenCV choking on one odd frame must not end the run
@@ -593,7 +595,7 @@ class ExtrinsicSession:
         try:
             res = extrinsics_from_image(img, cam, self.board)
         except DtscalError as exc:  # counted under the frame's own reason (size, NaN, board, homography)
-            reason = getattr(exc, "reason", None) or Reason.HOMOGRAPHY_FAILED
+            reason = exc.reason or Reason.HOMOGRAPHY_FAILED
             self._tally.reject(reason)
             self.last_error = exc
             return Offer(False, reason, None, img)

@@ -115,16 +115,37 @@ class SynthFrame:
 
 @dataclass(frozen=True, eq=False)
 class Renderer:
-    """A camera prepared for rendering: one undistorted ray per sub-pixel.
+    """A camera prepared for rendering: one undistorted ray per sub-pixel. The kit's one ray caster.
 
     Build it once with :func:`make_renderer` (a few seconds) and reuse it for every
-    frame of that camera.
+    frame of that camera. :meth:`plane_coords` casts the rays onto a plane (a board, the
+    floor) and :meth:`downsample` area-averages what a texture made of them to pixels: the
+    recorded session, the stress set, the course's board images and the benchmarks' frames
+    are all drawn this way.
     """
 
     camera: CameraModel
     supersample: int
     #: (H*s, W*s, 2) float64 normalized undistorted coordinates of the sub-pixel centres
     rays: np.ndarray = field(repr=False)
+
+    def plane_coords(self, R, t, window: tuple[int, int, int, int] | None = None):
+        """Where each sub-pixel's ray meets the plane ``X = R [p0, p1, 0] + t``: ``(p0, p1, hit)``.
+
+        ``window`` ``(x0, y0, x1, y1)`` (pixels) limits the rays to that part of the image.
+        Arrays of shape ``(rows * s, cols * s)``; ``hit`` is False where the ray meets the
+        plane behind the camera (or not at all).
+        """
+        rays = self.rays
+        if window is not None:
+            x0, y0, x1, y1 = window
+            s = self.supersample
+            rays = rays[y0 * s : y1 * s, x0 * s : x1 * s]
+        return _plane_coords(rays, as_rotation(R), np.asarray(t, dtype=np.float64).reshape(3))
+
+    def downsample(self, a: np.ndarray) -> np.ndarray:
+        """Sub-pixel values (``s`` x ``s`` per pixel) area-averaged to pixels (``cv2.INTER_AREA``)."""
+        return _downsample(a, self.supersample)
 
 
 def synthetic_camera() -> CameraModel:
@@ -181,7 +202,7 @@ def _pattern_outline(board: Board, n: int = 24) -> np.ndarray:
 
 
 def _sheet_outline(board: Board, sheet: Sheet, n: int = 24) -> np.ndarray:
-    cx, cy = (board.cols - 1) * board.square / 2, (board.rows - 1) * board.square / 2
+    cx, cy = board.centre[:2]
     t = np.linspace(0.0, 1.0, n, endpoint=False)
     x0, x1 = cx - sheet.width / 2, cx + sheet.width / 2
     y0, y1 = cy - sheet.height / 2, cy + sheet.height / 2
@@ -299,7 +320,7 @@ def _sheet_texture(bx: np.ndarray, by: np.ndarray, ok: np.ndarray, board: Board,
     each sub-pixel's footprint, then the sub-pixels are area-averaged by the caller.
     """
     s = board.square
-    cx, cy = (board.cols - 1) * s / 2, (board.rows - 1) * s / 2
+    cx, cy = board.centre[:2]
     on_paper = ok & (np.abs(bx - cx) <= sheet.width / 2) & (np.abs(by - cy) <= sheet.height / 2)
     u, v = bx / s, by / s  # in squares; squares occupy u in [-1, cols], v in [-1, rows]
     wu = np.where(ok, _footprint(u), 1.0)
@@ -406,21 +427,18 @@ def _finish(linear: np.ndarray, exposure: Exposure, rng: np.random.Generator | N
 
 def _render_layer(renderer: Renderer, R, t, texture: Callable, bbox):
     """Premultiplied colour (H, W, 3) and coverage (H, W) of one textured plane."""
-    cam = renderer.camera
-    w, h = cam.size
-    s = renderer.supersample
+    w, h = renderer.camera.size
     color = np.zeros((h, w, 3), dtype=np.float32)
     alpha = np.zeros((h, w), dtype=np.float32)
     x0, y0, x1, y1 = (0, 0, w, h) if bbox is None else bbox
     if x1 <= x0 or y1 <= y0:
         return color, alpha
-    rays = renderer.rays[y0 * s : y1 * s, x0 * s : x1 * s]
-    p0, p1, ok = _plane_coords(rays, R, t)
+    p0, p1, ok = renderer.plane_coords(R, t, (x0, y0, x1, y1))
     val, cov = texture(p0, p1, ok)
     if val.ndim == 2:
         val = val[:, :, None] * np.ones(3, dtype=np.float32)
-    color[y0:y1, x0:x1] = _downsample(np.ascontiguousarray(val * cov[:, :, None]), s)
-    alpha[y0:y1, x0:x1] = _downsample(cov, s)
+    color[y0:y1, x0:x1] = renderer.downsample(np.ascontiguousarray(val * cov[:, :, None]))
+    alpha[y0:y1, x0:x1] = renderer.downsample(cov)
     return color, alpha
 
 
@@ -709,8 +727,7 @@ def _pose_from_params(camera: CameraModel, board: Board, p) -> tuple[np.ndarray,
     xb /= np.linalg.norm(xb)
     R_face = np.column_stack([xb, np.cross(zb, xb), zb])
     R = R_face @ _rot("z", roll) @ _rot("y", yaw) @ _rot("x", pitch)
-    centre = np.array([(board.cols - 1) * board.square / 2, (board.rows - 1) * board.square / 2, 0.0])
-    return R, C - R @ centre
+    return R, C - R @ board.centre
 
 
 @dataclass(frozen=True)
@@ -787,7 +804,7 @@ def intrinsic_session(seed: int = DEFAULT_SEED, *, frames: Iterable[int] | None 
         if pa is not None and pb is not None:
             Ra, ta = _pose_from_params(camera, board, np.asarray(pa) + tremor((i - half) / fps))
             Rb, tb = _pose_from_params(camera, board, np.asarray(pb) + tremor((i + half) / fps))
-            centre = np.array([[(board.cols - 1) * board.square / 2, (board.rows - 1) * board.square / 2, 0.0]])
+            centre = board.centre[None, :]
             try:
                 ua = project_points(centre, Ra, ta, camera.K, camera.dist)[0]
                 ub = project_points(centre, Rb, tb, camera.K, camera.dist)[0]

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install the kit into ./.venv (idempotent). Usage: bash scripts/setup.sh [--test]
-#   --test  also install what the test suite needs (pytest, nbval, ...; ROS 1 tools from Debian)
+#   --test  also install what the test suite needs (pytest, nbval, ...; ROS 1 tools and mrcal from Debian)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -31,6 +31,8 @@ if [ "${1:-}" = "--test" ]; then
   .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on $QUIET -e ".[test]"
   echo "setup: ROS 1 tools" >&2
   bash scripts/install-ros.sh
+  echo "setup: mrcal, the peer the benchmarks and tests measure the calibration against" >&2
+  bash scripts/install-mrcal.sh
   echo "setup: the browser for the UI tests" >&2
   bash scripts/install-browser.sh
 else

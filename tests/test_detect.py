@@ -361,8 +361,7 @@ def test_order_corners_agrees_with_the_order_derived_from_the_pose():
         axis = rng.normal(size=3)
         rvec = axis / np.linalg.norm(axis) * rng.uniform(0, np.pi)
         R = cv2.Rodrigues(rvec)[0]
-        centre = np.array([(B.cols - 1) * B.square / 2, (B.rows - 1) * B.square / 2, 0.0])
-        tvec = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), 0.45]) - R @ centre
+        tvec = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), 0.45]) - R @ B.centre
         if abs(R[2, 2]) < 0.3:  # nearly edge-on: no usable image of the grid
             continue
         uv = cv2.projectPoints(obj, rvec, tvec, K, None)[0].reshape(B.rows, B.cols, 2)

@@ -154,3 +154,24 @@ def test_extrinsics_say_found_and_rejected_naming_the_corner(monkeypatch):
     msg = str(e.value)
     assert "was found in the rectified image but rejected: corner at row 3, column 4" in msg and "2.40 px" in msg
     assert "not found" not in msg
+
+
+@pytest.mark.parametrize("name", ["left/left01.jpg", "right/right03.jpg"])
+def test_one_displaced_corner_on_the_outer_ring_is_rejected_by_name(name):
+    """The outer ring is checked too (from the 3x3 block reaching inward): 0.12 of a square is caught.
+
+    (A bump much larger than that, a third of its own width, folds the image so that the detector finds
+    the corner back on its neighbours' grid, within 0.3 px of where the flat print had it.)"""
+    img = cv2.imread(str(REAL / name), cv2.IMREAD_GRAYSCALE)
+    corners = detect_board_still(img, BOARD).corners
+    k = 4  # row 1, column 5: the middle of the first row
+    c = corners[k]
+    square = float(np.linalg.norm(corners[5] - corners[4]))
+    shift, sigma = 0.12 * square, 0.35 * square
+
+    def d(x, y):
+        w = np.exp(-((x - c[0]) ** 2 + (y - c[1]) ** 2) / (2 * sigma ** 2))
+        return -shift * w, 0.0 * w
+    det = detect_board_still(_warp(img, d), BOARD)
+    assert not det.found and det.reason == "inconsistent_grid"
+    assert det.detail.startswith("corner at row 1, column 5 "), det.detail

@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dtscal_lib import duckietown as dt
+from dtscal_lib import synth
 from dtscal_lib.boards import DUCKIETOWN_BOARD, GROUND_NEAR_ROW_X, Board, ground_points
 from dtscal_lib.camera import CameraModel
 from dtscal_lib.errors import CalibrationError, DtscalError
@@ -51,44 +52,41 @@ def pose_homography(Kp: np.ndarray, height: float, pitch_deg: float, yaw_deg: fl
     return H / H[2, 2]
 
 
-def render_board_frame(camera: CameraModel, H: np.ndarray, board: Board = DUCKIETOWN_BOARD,
-                       px_per_m: float = 2000.0) -> np.ndarray:
+_CASTERS: dict = {}
+
+
+def render_board_frame(camera: CameraModel, H: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
     """The raw (distorted) frame a camera with ground homography H sees of the board on the floor.
 
-    A top-down texture of the floor (grey), the paper (white) and the board's squares is
-    made at ``px_per_m``; every distorted pixel is rectified with the camera, mapped to the
-    ground with H and sampled from the texture (a single resampling).
+    The kit's ray caster (:class:`dtscal_lib.synth.Renderer`, 2x2 sub-pixels) meets the ground
+    with every sub-pixel's ray: rectified pixel ``Kp [x, y, 1]`` -> ground ``H Kp [x, y, 1]``.
+    The floor is grey (120), the paper white (235), the board's squares black (20), what lies
+    above the horizon 90; the sub-pixels are area-averaged to pixels.
     """
+    key = id(camera)
+    if key not in _CASTERS:
+        _CASTERS[key] = (camera, synth.make_renderer(camera, 2))  # keep the camera: its id stays its own
+    caster = _CASTERS[key][1]
+    w, h = camera.size
+    G = H @ camera.rectified_K                          # normalized ray (x, y, 1) -> ground, up to scale
+    G = G * np.sign(H[2] @ [w / 2, h - 1, 1.0])         # w > 0 below the horizon (the bottom centre is)
+    M = np.linalg.inv(G)                                # ground (X, Y, 1) -> ray: the plane's [r1 r2 t]
+    X, Y, front = caster.plane_coords(np.column_stack([M[:, 0], M[:, 1], np.cross(M[:, 0], M[:, 1])]), M[:, 2])
     s = board.square
     x_lo = GROUND_NEAR_ROW_X - s                       # near edge of the squares
     y_lo = -(board.cols - 1) * s / 2 - s               # right edge of the squares
-    gx0, gx1, gy0, gy1 = 0.05, 0.60, -0.40, 0.40
-    th, tw = int((gx1 - gx0) * px_per_m), int((gy1 - gy0) * px_per_m)
-    r, c = np.mgrid[0:th, 0:tw]
-    X = gx0 + (r + 0.5) / px_per_m
-    Y = gy0 + (c + 0.5) / px_per_m
     i = np.floor((X - x_lo) / s).astype(int)
     j = np.floor((Y - y_lo) / s).astype(int)
     on_board = (i >= 0) & (i <= board.rows) & (j >= 0) & (j <= board.cols)
     m = 0.02
     paper = ((X > x_lo - m) & (X < x_lo + (board.rows + 1) * s + m)
              & (Y > y_lo - m) & (Y < y_lo + (board.cols + 1) * s + m))
-    tex = np.full((th, tw), 120, np.uint8)
-    tex[paper] = 235
-    tex[on_board & ((i + j) % 2 == 0)] = 20
-    tex = cv2.GaussianBlur(tex, (0, 0), 1.0)  # anti-alias: a camera pixel covers several texels
-
-    w, h = camera.size
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    rect = camera.undistort_pixels(np.column_stack([u.ravel(), v.ravel()]))
-    hom = rect @ H[:, :2].T + H[:, 2]
-    ref = np.sign(H[2] @ [w / 2, h - 1, 1.0])            # sign of w below the horizon
-    front = (np.sign(hom[:, 2]) == ref) & (np.abs(hom[:, 2]) > 1e-9)
-    g = np.full((len(rect), 2), -1e6)
-    g[front] = hom[front, :2] / hom[front, 2:3]
-    mx = ((g[:, 1] - gy0) * px_per_m - 0.5).reshape(h, w).astype(np.float32)
-    my = ((g[:, 0] - gx0) * px_per_m - 0.5).reshape(h, w).astype(np.float32)
-    grey = cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=90)
+    grey = np.full(X.shape, 120.0, np.float32)
+    grey[paper] = 235.0
+    grey[on_board & ((i + j) % 2 == 0)] = 20.0
+    grey[~front] = 90.0
+    grey = np.rint(caster.downsample(grey)).astype(np.uint8)
+    assert grey.shape == (h, w)
     return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
 
 

@@ -122,7 +122,7 @@ def _views(n, seed, tilt=0.5, base=(0.0, 0.0), noise=0.1):
         r = np.array([base[0] + rng.uniform(-tilt, tilt), base[1] + rng.uniform(-tilt, tilt), rng.uniform(-0.3, 0.3)])
         R = cv2.Rodrigues(r)[0]
         t = np.array([rng.uniform(-0.08, 0.08), rng.uniform(-0.06, 0.06), rng.uniform(0.3, 0.5)])
-        t -= R @ [0.093, 0.062, 0]
+        t -= R @ DUCKIETOWN_BOARD.centre
         try:
             p = project_points(obj, r, t, dt.default_K(), dt.default_dist())
         except ValueError:

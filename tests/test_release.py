@@ -261,3 +261,26 @@ def test_execute_twice_changes_no_stored_output(tmp_path, capsys):
     rel.execute_solutions(sol)
     assert (sol / "01_pinhole_projection.ipynb").read_text() == first
     assert rel.WIDGET_VIEW not in first and "pinhole explorer" in first
+
+
+def test_split_stream_outputs_are_joined():
+    """A line printed in two stream messages (the kernel flushed in between) is stored as one output, as nbval
+    compares it: a re-run's file does not depend on when the kernel flushed."""
+    import nbformat
+
+    nb = nbformat.v4.new_notebook()
+    cell = nbformat.v4.new_code_cell("print('a', end=''); print()")
+    cell.outputs = [nbformat.v4.new_output("stream", name="stdout", text="using your `f`"),
+                    nbformat.v4.new_output("stream", name="stdout", text="\n"),
+                    nbformat.v4.new_output("stream", name="stderr", text="warning\n"),
+                    nbformat.v4.new_output("stream", name="stdout", text="done\n")]
+    nb.cells = [cell, nbformat.v4.new_markdown_cell("text")]
+    assert rel.coalesce_streams(nb) == 1
+    assert [(o.name, o.text) for o in cell.outputs] == [("stdout", "using your `f`\n"), ("stderr", "warning\n"),
+                                                        ("stdout", "done\n")]
+
+
+def test_stored_solutions_hold_no_split_stream():
+    for p in sorted(SOLUTIONS.glob("*.ipynb")):
+        nb = rel._read(p)
+        assert rel.coalesce_streams(nb) == 0, f"{p.name}: run `dtscal release --execute` (it joins them)"

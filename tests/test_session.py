@@ -7,7 +7,8 @@
 * ``calibrate-extrinsics --format 2 --keep-anyway`` writes the rejected file beside, in version 2
   (it used to print "nothing written (--no-write)" without ``--no-write``).
 * The walk of a frame to a committed file, traced call by call (docstring of
-  :func:`test_the_walk_visits_each_module_once_and_the_live_tool_walks_the_same_session`).
+  :func:`test_the_walk_visits_each_module_once_and_the_live_tool_walks_the_same_session`), into a
+  calibrations folder and (slow: a private ``roscore`` and a camera node) to the robot over ROS.
 * The library does not import the teaching layer ``dtscal_lib/course``.
 """
 
@@ -152,8 +153,8 @@ def test_one_robot_name_rule():
 
 # --------------------------------------------------------------------------- the walk
 #: the layers of a calibration's walk: drivers call the session, the session calls the areas below
-DRIVERS = {"cli", "pipeline", "ui.intrinsic", "ui.extrinsic", "ui.background", "ui.frameloop", "ui.render",
-           "ui.archive"}
+DRIVERS = {"cli", "pipeline", "ui.intrinsic", "ui.intrinsic_driver", "ui.extrinsic", "ui.extrinsic_driver",
+           "ui.background", "ui.frameloop", "ui.render", "ui.archive"}
 AREAS = {"detect": {"detect", "coverage", "boards"}, "calibration": {"calibration", "camera", "ui.solver"},
          "judge": {"plausibility", "quality", "ground", "report"}, "files": {"calib_files", "safe_yaml"},
          "robot": {"robot"}}
@@ -241,6 +242,40 @@ def short_bag(tmp_path_factory) -> Path:
                                       "/walkbot/camera_node/image/compressed", frames)
 
 
+def walk_the_live_calibrator(bag: Path, folder: Path, target: str) -> tuple[Walk, str]:
+    """Frames of ``bag`` stepped into the live calibrator, CALIBRATE, COMMIT to ``target``, traced."""
+    from dtscal_lib.ui import LiveCalibrator
+
+    app = LiveCalibrator(str(bag), autostart=False, calibration_dir=folder)
+    try:
+        frames = [f for f in open_source(bag) if f.ok]
+        app.prepare_calibration = lambda wait=0.0: False  # CALIBRATE in this process, where it is traced
+        with Walk() as walk:
+            for f in frames:
+                app.loop.step(f)
+            assert app.calibrate(wait=True) is not None, app.calibrate_error
+            app.commit_target.value = target
+            msg = app.commit()
+    finally:
+        app.close()
+    return walk, msg
+
+
+def check_walk(walk: Walk, areas: list[str], steps: list[tuple[str, str]]) -> None:
+    """No climb; the session enters ``areas`` in that order, each once; ``steps`` are called by the session only."""
+    assert walk.climbs() == []
+    assert walk.session_walk() == areas
+    called = walk.steps_called_by()
+    for step in steps:
+        assert called.get(step) == {"session"}, (step, called.get(step))
+
+
+#: the steps of every walk, and of a walk that ends on the robot
+FOLDER_STEPS = [("detect", "detect_board"), ("calibration", "calibrate"), ("plausibility", "intrinsic_doubts"),
+                ("calib_files", "save_intrinsics")]
+ROBOT_STEPS = FOLDER_STEPS + [("robot", "commit_intrinsics")]
+
+
 def test_the_walk_visits_each_module_once_and_the_live_tool_walks_the_same_session(short_bag, tmp_path):
     """Reading of "a walk of one bag frame to a committed file visits each module once (no return to a
     module already left), and the same walk from the live calibrator goes through the same session":
@@ -259,34 +294,70 @@ def test_the_walk_visits_each_module_once_and_the_live_tool_walks_the_same_sessi
        left;
     3. the steps themselves (detect_board, calibrate, intrinsic_doubts, save_intrinsics) are called
        by the session only, from both drivers: the live calibrator walks the same session.
-    """
-    from dtscal_lib.ui import LiveCalibrator
 
+    The walk that ends on the robot (COMMIT over ROS) is
+    :func:`test_the_walk_to_the_robot_over_ros_goes_through_the_session`.
+    """
     with Walk() as cli_walk:
         run = pipeline.calibrate_intrinsics(short_bag, out_dir=tmp_path / "cli")
     assert run.path == tmp_path / "cli" / "camera_intrinsic" / "walkbot.yaml" and run.path.exists()
 
-    app = LiveCalibrator(str(short_bag), autostart=False, calibration_dir=tmp_path / "live")
-    try:
-        frames = [f for f in open_source(short_bag) if f.ok]
-        app.prepare_calibration = lambda wait=0.0: False  # CALIBRATE in this process, where it is traced
-        with Walk() as live_walk:
-            for f in frames:
-                app.loop.step(f)
-            assert app.calibrate(wait=True) is not None, app.calibrate_error
-            app.commit_target.value = "folder"
-            msg = app.commit()
-        assert msg.startswith("COMMIT: wrote"), msg
-    finally:
-        app.close()
+    live_walk, msg = walk_the_live_calibrator(short_bag, tmp_path / "live", "folder")
+    assert msg.startswith("COMMIT: wrote"), msg
 
     for walk in (cli_walk, live_walk):
-        assert walk.climbs() == []
-        assert walk.session_walk() == ["detect", "calibration", "judge", "files"]
-        steps = walk.steps_called_by()
-        for step in [("detect", "detect_board"), ("calibration", "calibrate"),
-                     ("plausibility", "intrinsic_doubts"), ("calib_files", "save_intrinsics")]:
-            assert steps.get(step) == {"session"}, (step, steps.get(step))
+        check_walk(walk, ["detect", "calibration", "judge", "files"], FOLDER_STEPS)
+
+
+@pytest.mark.slow
+def test_the_walk_to_the_robot_over_ros_goes_through_the_session(short_bag, tmp_path, monkeypatch, capsys):
+    """The same walk to the end of the kit's real ROS path: a private ``roscore`` and a Duckiebot camera node
+    (rospy, Debian's ROS 1) whose ``set_camera_info`` writes the robot-side ``camera_intrinsic/walkbot.yaml``.
+
+    Traced as above: ``dtscal calibrate-intrinsics --commit`` (the command line, in this process) and the
+    live calibrator's COMMIT with the target "robot over ROS". In both the session enters detect ->
+    calibration -> judge -> files -> robot, each once and in that order, nothing climbs back, and
+    ``commit_intrinsics`` (the send to the robot) is called by the session only. The robot-side file is the
+    local one, number for number.
+    """
+    from ci import missing as missing_in_ci
+    from test_ros_bag_play import SYSTEM_PYTHON, _log, _missing_ros, _started, running_roscore
+    from test_ros_live import CAMERA_NODE, _wait
+
+    from dtscal_lib import cli
+
+    if _missing_ros():
+        missing_in_ci(f"ROS 1 tools missing ({_missing_ros()}); install them with scripts/install-ros.sh")
+    robot_root = tmp_path / "robot" / "data" / "config" / "calibrations"
+    robot_side = robot_root / "camera_intrinsic" / "walkbot.yaml"
+    script = tmp_path / "camera_node.py"
+    script.write_text(CAMERA_NODE)
+    node_log = tmp_path / "camera_node.log"
+    with running_roscore(tmp_path / "home") as env, \
+            _started([SYSTEM_PYTHON, str(script), "walkbot", str(robot_root)], env, node_log) as node:
+        _wait(lambda: "READY" in _log(node_log) or node.poll() is not None, 60, "the camera node")
+        assert node.poll() is None, _log(node_log)
+        monkeypatch.setenv("ROS_MASTER_URI", env["ROS_MASTER_URI"])  # the live COMMIT's master (a bag has none)
+
+        with Walk() as cli_walk:
+            code = cli.main(["calibrate-intrinsics", "--source", str(short_bag), "--out", str(tmp_path / "cli"),
+                             "--commit", "--master-uri", env["ROS_MASTER_URI"], "-q"])
+        out = capsys.readouterr()
+        assert code == 0, out.err
+        local = tmp_path / "cli" / "camera_intrinsic" / "walkbot.yaml"
+        assert f"committed to walkbot: Write to {robot_side}" in out.out, out
+        np.testing.assert_allclose(calib_files.load_intrinsics(robot_side).K, calib_files.load_intrinsics(local).K,
+                                   rtol=1e-12)
+        robot_side.unlink()
+
+        live_walk, msg = walk_the_live_calibrator(short_bag, tmp_path / "live", "ros")
+        local = tmp_path / "live" / "camera_intrinsic" / "walkbot.yaml"
+        assert msg == f"COMMIT to walkbot: Write to {robot_side} (local copy: {local})", msg
+        np.testing.assert_allclose(calib_files.load_intrinsics(robot_side).K, calib_files.load_intrinsics(local).K,
+                                   rtol=1e-12)
+
+    for walk in (cli_walk, live_walk):
+        check_walk(walk, ["detect", "calibration", "judge", "files", "robot"], ROBOT_STEPS)
 
 
 # --------------------------------------------------------------------------- layers

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from dtscal_lib.boards import DUCKIETOWN_BOARD
+from dtscal_lib.poses import random_board_pose
 from dtscal_lib.release import solution_functions
 from nbtools import SOLUTIONS, need
 
@@ -28,11 +29,7 @@ def random_K(rng, skew: float = 0.0) -> np.ndarray:
 
 
 def random_pose(rng, max_deg: float = 40.0, distance=(0.3, 0.9)):
-    axis = rng.normal(size=3)
-    rvec = axis / np.linalg.norm(axis) * np.deg2rad(rng.uniform(5, max_deg))
-    R = cv2.Rodrigues(rvec)[0]
-    t = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), rng.uniform(*distance)]) - R @ BOARD.mean(0)
-    return R, t
+    return random_board_pose(rng, tilt_deg=(5.0, max_deg), distance=distance)
 
 
 def cv_transform(H, pts) -> np.ndarray:

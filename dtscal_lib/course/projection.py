@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Callable, Sequence
 
-import cv2
 import numpy as np
 
 from .. import camera as cam
@@ -12,36 +11,12 @@ from .. import duckietown as dt
 from ..boards import DUCKIETOWN_BOARD, Board
 from ..duckietown import IMAGE_SIZE
 from ..errors import DtscalError
+from ..poses import look_at_pose, random_board_pose
+from ..synth import make_renderer
 from .fallback import Fallback
 from .figure import CourseFigure, draw_board, image_axes, new_figure, png_bytes
 
 __all__ = ["look_at_pose", "sample_views", "projection_figure", "pinhole_explorer", "render_board_image"]
-
-
-def look_at_pose(yaw_deg: float = 0.0, pitch_deg: float = 0.0, roll_deg: float = 0.0,
-                 distance: float = 0.5, shift_x: float = 0.0, shift_y: float = 0.0,
-                 board: Board = DUCKIETOWN_BOARD) -> tuple[np.ndarray, np.ndarray]:
-    """A camera looking at the board's centre: world (board) -> camera rotation (3, 3) and translation (3,).
-
-    The camera starts ``distance`` metres in front of the board's centre, looking at it
-    straight on, then turns by yaw (about its y axis), pitch (x axis) and roll (z axis),
-    and is shifted sideways by ``shift_x``, ``shift_y`` metres in the board plane.
-
-    >>> R, t = look_at_pose(distance=0.5)
-    >>> float(t[2]) == 0.5
-    True
-    """
-    if not distance > 0:
-        raise DtscalError(f"distance must be positive (metres in front of the board), got {distance}")
-    y, p, r = np.deg2rad([yaw_deg, pitch_deg, roll_deg])
-    Ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
-    Rx = np.array([[1, 0, 0], [0, np.cos(p), -np.sin(p)], [0, np.sin(p), np.cos(p)]])
-    Rz = np.array([[np.cos(r), -np.sin(r), 0], [np.sin(r), np.cos(r), 0], [0, 0, 1]])
-    R = Rz @ Rx @ Ry
-    centre = board.object_points().mean(axis=0) + [shift_x, shift_y, 0.0]
-    # the camera sits on the board normal through `centre`, at `distance`, then rotates about itself
-    t = np.array([0.0, 0.0, distance]) - R @ centre
-    return R, t
 
 
 def sample_views(K: np.ndarray, n: int, seed: int, *, min_tilt_deg: float = 10.0, max_tilt_deg: float = 40.0,
@@ -55,7 +30,6 @@ def sample_views(K: np.ndarray, n: int, seed: int, *, min_tilt_deg: float = 10.0
     """
     rng = np.random.default_rng(seed)
     obj = board.object_points()
-    centre = obj.mean(axis=0)
     w, h = size
     out: list = []
     tries = 0
@@ -63,14 +37,8 @@ def sample_views(K: np.ndarray, n: int, seed: int, *, min_tilt_deg: float = 10.0
         tries += 1
         if tries > 200 * n:
             raise DtscalError("could not place the board inside the image; widen the distance range")
-        phi = rng.uniform(0, 2 * np.pi)
-        axis = np.array([np.cos(phi), np.sin(phi), 0.0])
-        tilt = np.deg2rad(rng.uniform(min_tilt_deg, max_tilt_deg))
-        spin = np.deg2rad(rng.uniform(-20, 20))
-        R = cv2.Rodrigues(axis * tilt)[0] @ cv2.Rodrigues(np.array([0, 0, spin]))[0]
-        z = rng.uniform(*distance)
-        aim = np.array([rng.uniform(-0.35, 0.35) * z, rng.uniform(-0.25, 0.25) * z, z])
-        t = aim - R @ centre
+        R, t = random_board_pose(rng, board, tilt_deg=(min_tilt_deg, max_tilt_deg), distance=distance,
+                                 spread=(0.35, 0.25), spin_deg=20.0)
         try:
             uv = cam.project_points(obj, R, t, K, dist)
         except DtscalError:
@@ -213,34 +181,22 @@ def render_board_image(K: np.ndarray, dist, R, t, board: Board = DUCKIETOWN_BOAR
     """A grey image of the checkerboard seen by a (distorted) camera, by ray casting.
 
     Each pixel (supersampled ``supersample`` x ``supersample``) is undistorted, its ray is
-    intersected with the board plane, and coloured by the square it hits. The board has
-    ``cols + 1`` by ``rows + 1`` squares (inner corners at the object points) and a white
-    margin of one square.
+    intersected with the board plane, and coloured by the square it hits: the kit's ray
+    caster, :class:`dtscal_lib.synth.Renderer`. The board has ``cols + 1`` by ``rows + 1``
+    squares (inner corners at the object points) and a white margin of one square.
 
     Returns
     -------
     (height, width) uint8
     """
-    w, h = size
-    s = int(supersample)
-    u, v = np.meshgrid((np.arange(w * s) + 0.5) / s - 0.5, (np.arange(h * s) + 0.5) / s - 0.5)
-    xy = cam.undistort_pixels(np.column_stack([u.ravel(), v.ravel()]), K, dist)
-    rays = np.column_stack([xy, np.ones(len(xy))])
-    R = cam.as_rotation(R)
-    t = np.asarray(t, dtype=float).reshape(3)
-    n = R[:, 2]  # board normal in the camera frame; the plane holds the points with n . Xc = n . t
-    denom = rays @ n
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = (n @ t) / denom
-    hit = np.isfinite(lam) & (lam > 0)
-    Xb = (lam[:, None] * rays - t) @ R  # board-frame coordinates, rows R^T (Xc - t)
+    renderer = make_renderer(cam.CameraModel(K, dist, size), supersample)
+    bx, by, hit = renderer.plane_coords(R, t)
     sq = board.square
-    i = np.floor(Xb[:, 0] / sq).astype(np.int64) + 1  # square column, 0 .. cols
-    j = np.floor(Xb[:, 1] / sq).astype(np.int64) + 1
+    i = np.floor(bx / sq).astype(np.int64) + 1  # square column, 0 .. cols
+    j = np.floor(by / sq).astype(np.int64) + 1
     inside = hit & (i >= 0) & (i <= board.cols) & (j >= 0) & (j <= board.rows)
     margin = hit & (i >= -1) & (i <= board.cols + 1) & (j >= -1) & (j <= board.rows + 1)
-    img = np.full(len(xy), float(background))
+    img = np.full(bx.shape, float(background))
     img[margin] = 235.0
     img[inside & ((i + j) % 2 == 0)] = 20.0
-    img = img.reshape(h * s, w * s)
-    return cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA).round().astype(np.uint8)
+    return renderer.downsample(img).round().astype(np.uint8)

@@ -20,8 +20,10 @@ import cv2
 import numpy as np
 
 from .. import duckietown as dt
+from ..boards import DUCKIETOWN_BOARD
 from ..camera import intrinsic_matrix, new_camera_matrix
 from ..errors import DtscalError
+from ..poses import board_homography, points_on_rays, random_board_pose
 from .sandbox import CheckRun
 
 CAMERAS = {
@@ -58,35 +60,15 @@ class Built:
 
 # --------------------------------------------------------------------------- inputs
 def _pose(rng, distance=(0.3, 0.9), max_deg=40.0):
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    R = cv2.Rodrigues(axis * np.deg2rad(rng.uniform(5.0, max_deg)))[0]
-    z = rng.uniform(*distance)
-    aim = np.array([rng.uniform(-0.2, 0.2) * z, rng.uniform(-0.15, 0.15) * z, z])
-    return R, aim - R @ np.array([0.093, 0.062, 0.0])
-
-
-def _rays(K, R, t, uv, depth):
-    """World points seen at pixels ``uv`` at ``depth`` (ground truth by construction)."""
-    Xc = np.column_stack([uv, np.ones(len(uv))]) @ np.linalg.inv(K).T * depth[:, None]
-    return (Xc - t) @ R
+    return random_board_pose(rng, DUCKIETOWN_BOARD, tilt_deg=(5.0, max_deg), distance=distance, spread=(0.2, 0.15))
 
 
 def _img_span(K):
     return 2 * K[0, 2], 2 * K[1, 2]
 
 
-def _board_H(K, R, t):
-    H = K @ np.column_stack([R[:, 0], R[:, 1], t])
-    return H / H[2, 2]
-
-
 def _apply(H, pts):
     return cv2.perspectiveTransform(np.asarray(pts, float).reshape(-1, 1, 2), np.asarray(H, float)).reshape(-1, 2)
-
-
-def _board_xy(cols=7, rows=5, sq=0.031):
-    return np.array([[i * sq, j * sq] for j in range(rows) for i in range(cols)], float)
 
 
 def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
@@ -102,14 +84,14 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
         for _ in range(views):
             R, t = _pose(rng, distance=tuple(p.get("distance", (0.3, 0.9))))
             uv = np.column_stack([rng.uniform(0.03 * w, 0.97 * w, n), rng.uniform(0.03 * h, 0.97 * h, n)])
-            args.append((K.copy(), R, t, _rays(K, R, t, uv, rng.uniform(*p.get("depth", (0.3, 2.0)), n))))
+            args.append((K.copy(), R, t, points_on_rays(K, R, t, uv, rng.uniform(*p.get("depth", (0.3, 2.0)), n))))
             truth.append(uv)
         return args, truth
     if func in ("apply_homography", "pixel_to_ground"):
         args, truth = [], []
         for _ in range(views):
             R, t = _pose(rng)
-            H = _board_H(CAMERAS[p.get("camera", "duckie")], R, t) * float(p.get("scale", 1.0))
+            H = board_homography(CAMERAS[p.get("camera", "duckie")], R, t) * float(p.get("scale", 1.0))
             H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 50.0) if p.get("random_scale") else H
             pts = np.column_stack([rng.uniform(-0.1, 0.3, n), rng.uniform(-0.1, 0.25, n)])
             if func == "pixel_to_ground":
@@ -125,7 +107,7 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             src = np.column_stack([rng.uniform(0, 640, n), rng.uniform(0, 480, n)]) * span + off
             A = np.array([[0.25 / (640 * span), 0, -off * 0.25 / (640 * span)],
                           [0, 0.2 / (480 * span), -off * 0.2 / (480 * span)], [0, 0, 1.0]])
-            H = _board_H(CAMERAS[p.get("camera", "duckie")], R, t) @ A
+            H = board_homography(CAMERAS[p.get("camera", "duckie")], R, t) @ A
             H /= H[2, 2]
             dst = _apply(H, src) + rng.normal(0.0, sigma, size=(n, 2))
             args.append((src, dst))
@@ -138,11 +120,11 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
         for _ in range(max(views, 1)):
             R, t = _pose(rng, distance=(0.35, 0.7), max_deg=45.0)
             if sigma:
-                obj = _board_xy()
-                img = _apply(_board_H(K, R, t), obj) + rng.normal(0.0, sigma, size=(len(obj), 2))
+                obj = DUCKIETOWN_BOARD.object_points()[:, :2]
+                img = _apply(board_homography(K, R, t), obj) + rng.normal(0.0, sigma, size=(len(obj), 2))
                 H = cv2.findHomography(obj, img, 0)[0]
             else:
-                H = _board_H(K, R, t)
+                H = board_homography(K, R, t)
             if p.get("random_scale"):
                 H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.01, 100.0)
             Hs.append(H)

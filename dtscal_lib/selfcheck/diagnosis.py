@@ -32,6 +32,7 @@ from ..boards import Board, ground_points
 from ..camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
 from ..camera import undistort_normalized as _newton_undistort
 from ..homography import apply_homography
+from ..poses import board_homography, random_board_pose
 from .projection import K_SKEWED
 
 __all__ = ["Mistake", "diagnose", "diagnose_function", "probe_args", "MISTAKES", "FUNCTIONS"]
@@ -56,28 +57,15 @@ K_PROBE = K_SKEWED
 
 
 def _pose(seed: int, distance: float = 0.6):
-    rng = np.random.default_rng(seed)
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    R = cv2.Rodrigues(axis * np.deg2rad(rng.uniform(20.0, 35.0)))[0]
-    t = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.04, 0.04), distance])
-    return R, t
+    return random_board_pose(np.random.default_rng(seed), tilt_deg=(20.0, 35.0), distance=distance)
 
 
 def _views(K, n, seed):
     """Exact board homographies of ``n`` tilted views (H = K [r1 r2 t], H[2, 2] = 1), poses."""
     rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(n):
-        axis = rng.normal(size=3)
-        axis[2] *= 0.3
-        axis /= np.linalg.norm(axis)
-        R = cv2.Rodrigues(axis * np.deg2rad(rng.uniform(15.0, 40.0)))[0]
-        z = rng.uniform(0.35, 0.7)
-        t = np.array([rng.uniform(-0.2, 0.2) * z, rng.uniform(-0.15, 0.15) * z, z]) - R @ [0.093, 0.062, 0.0]
-        H = K @ np.column_stack([R[:, 0], R[:, 1], t])
-        out.append((H / H[2, 2], R, t))
-    return out
+    poses = [random_board_pose(rng, tilt_deg=(15.0, 40.0), distance=(0.35, 0.7), spread=(0.2, 0.15), axis_z=0.3)
+             for _ in range(n)]
+    return [(board_homography(K, R, t), R, t) for R, t in poses]
 
 
 def _homog(H, pts, divide=True):

@@ -15,8 +15,9 @@ import cv2
 import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
+from ..poses import board_homography, random_board_pose
 from . import Case, CheckFailed, Report, expect_close, expect_shape, num, run_check
-from .projection import K_DUCKIE, random_pose
+from .projection import K_DUCKIE
 
 __all__ = [
     "check_apply_homography",
@@ -28,15 +29,6 @@ __all__ = [
 
 #: a student's fit on noisy points may have at most this much more transfer error than OpenCV's
 NOISY_TOLERANCE = 0.01
-
-
-def board_homography(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The homography of a board pose, eq. (5)-(6): ``H = K [r1 r2 t]`` scaled to ``H[2, 2] = 1``.
-
-    Maps board coordinates (X, Y) in metres to pixels. (3, 3) float64.
-    """
-    H = K @ np.column_stack([R[:, 0], R[:, 1], np.reshape(t, 3)])
-    return H / H[2, 2]
 
 
 def _opencv_apply(H, pts) -> np.ndarray:
@@ -58,7 +50,7 @@ def _apply(fn, H, pts):
 
 
 def _random_H(rng) -> np.ndarray:
-    R, t = random_pose(rng)
+    R, t = random_board_pose(rng)
     return board_homography(K_DUCKIE, R, t)
 
 
@@ -111,7 +103,7 @@ def _estimate(fn, src, dst):
 def _noisy_case(rng, n: int, sigma: float, offset: float = 0.0, span: float = 1.0):
     """Pixel -> pixel correspondences: src spread over a (scaled) image, dst = H_true src + noise."""
     src = np.column_stack([rng.uniform(40, 600, n), rng.uniform(40, 440, n)]) * span + offset
-    R, t = random_pose(rng)
+    R, t = random_board_pose(rng)
     # maps src back to board-like metres then to pixels: a generic well-conditioned homography
     A = np.array([[0.2 / (560 * span), 0, -offset * 0.2 / (560 * span)],
                   [0, 0.15 / (400 * span), -offset * 0.15 / (400 * span)], [0, 0, 1.0]])
@@ -146,7 +138,7 @@ def check_estimate_homography(fn: Callable) -> Report:
     sq_src = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
     sq_dst = np.array([[102.0, 80.0], [415.0, 95.0], [460.0, 390.0], [90.0, 350.0]])
     board = DUCKIETOWN_BOARD.object_points()[:, :2]
-    R, t = random_pose(rng)
+    R, t = random_board_pose(rng)
     H_board = board_homography(K_DUCKIE, R, t)
     noisy = [_noisy_case(rng, 35, 0.5) for _ in range(3)]
     big = _noisy_case(rng, 35, 1.0, offset=1.0e4)

@@ -16,44 +16,16 @@ import cv2
 import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
-from ..camera import intrinsic_matrix, pixel_to_normalized
+from ..camera import intrinsic_matrix
+from ..poses import points_on_rays, random_board_pose
 from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 
-__all__ = ["check_project_points", "random_pose", "K_DUCKIE", "K_SKEWED"]
+__all__ = ["check_project_points", "K_DUCKIE", "K_SKEWED"]
 
 #: a Duckiebot-like camera (fx, fy, cx, cy near the shipped default.yaml)
 K_DUCKIE = intrinsic_matrix(307.7, 315.0, 329.7, 244.5)
 #: the same with a visible skew: catches code that ignores K[0, 1]
 K_SKEWED = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=6.0)
-
-
-# --------------------------------------------------------------------------- ground truth
-def random_pose(rng: np.random.Generator, distance=(0.3, 0.8), max_angle_deg: float = 35.0):
-    """A board pose in front of the camera: rotation (3, 3) and translation (3,) metres.
-
-    The Duckietown board's centre lands near the optical axis at ``distance`` metres, tilted
-    by up to ``max_angle_deg`` about a random axis.
-    """
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    angle = np.deg2rad(rng.uniform(5.0, max_angle_deg))
-    R = cv2.Rodrigues((axis * angle).reshape(3, 1))[0]
-    centre = DUCKIETOWN_BOARD.object_points().mean(axis=0)
-    z = rng.uniform(*distance)
-    target = np.array([rng.uniform(-0.1, 0.1) * z, rng.uniform(-0.08, 0.08) * z, z])
-    t = target - R @ centre
-    return R, t
-
-
-def points_on_rays(K: np.ndarray, R: np.ndarray, t: np.ndarray, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """World points (N, 3) that a camera (K, R, t) must see at pixels ``uv`` (N, 2).
-
-    Each pixel is back-projected with ``K^-1`` (skew included) to a ray, the point is put at
-    ``depth`` along the optical axis, and moved to the world frame with ``R^T (Xc - t)``.
-    """
-    xy = pixel_to_normalized(uv, K)
-    Xc = np.column_stack([xy, np.ones(len(xy))]) * np.asarray(depth, dtype=float).reshape(-1, 1)
-    return (Xc - t.reshape(1, 3)) @ R  # rows: R^T (Xc - t)
 
 
 # --------------------------------------------------------------------------- the check
@@ -81,34 +53,33 @@ def _case_depth(fn):
     expect_close(_call(fn, K_DUCKIE, R, t, X, 3), want, 1e-9, "pixels of points in front of an unmoved camera")
 
 
-def _case_pose(fn):
-    rng = np.random.default_rng(101)
-    R, t = random_pose(rng)
-    uv = np.column_stack([rng.uniform(20, 620, 6), rng.uniform(20, 460, 6)])
-    X = points_on_rays(K_DUCKIE, R, t, uv, rng.uniform(0.3, 1.5, 6))
-    expect_close(_call(fn, K_DUCKIE, R, t, X, 6), uv, 1e-8, "pixels of points seen by a rotated, moved camera")
+def _case_on_rays(K, seed: int, n: int, what: str):
+    """A case of ``n`` points put on the rays of known pixels (random pose and depths) by a camera ``K``."""
+    def case(fn):
+        rng = np.random.default_rng(seed)
+        R, t = random_board_pose(rng)
+        uv = np.column_stack([rng.uniform(20, 620, n), rng.uniform(20, 460, n)])
+        X = points_on_rays(K, R, t, uv, rng.uniform(0.3, 1.5, n))
+        expect_close(_call(fn, K, R, t, X, n), uv, 1e-8, what)
+    return case
 
 
-def _case_skew(fn):
-    rng = np.random.default_rng(102)
-    R, t = random_pose(rng)
-    uv = np.column_stack([rng.uniform(20, 620, 8), rng.uniform(20, 460, 8)])
-    X = points_on_rays(K_SKEWED, R, t, uv, rng.uniform(0.3, 1.5, 8))
-    expect_close(_call(fn, K_SKEWED, R, t, X, 8), uv, 1e-8, "pixels with a skewed K")
+_case_pose = _case_on_rays(K_DUCKIE, 101, 6, "pixels of points seen by a rotated, moved camera")
+_case_skew = _case_on_rays(K_SKEWED, 102, 8, "pixels with a skewed K")
 
 
 def _case_opencv(fn):
     rng = np.random.default_rng(103)
     X = DUCKIETOWN_BOARD.object_points()
     for _ in range(3):
-        R, t = random_pose(rng)
+        R, t = random_board_pose(rng)
         want = cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K_DUCKIE, None)[0].reshape(-1, 2)
         expect_close(_call(fn, K_DUCKIE, R, t, X, len(X)), want, 1e-6, "board corners vs cv2.projectPoints")
 
 
 def _case_one_point(fn):
     rng = np.random.default_rng(104)
-    R, t = random_pose(rng)
+    R, t = random_board_pose(rng)
     uv = np.array([[100.0, 400.0]])
     X = points_on_rays(K_DUCKIE, R, t, uv, [0.7])
     expect_close(_call(fn, K_DUCKIE, R, t, X, 1), uv, 1e-8, "a single point, X of shape (1, 3)")

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
+from ..poses import board_homography, random_board_pose
 from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 from .projection import K_DUCKIE, K_SKEWED
 
@@ -54,20 +55,11 @@ def synthetic_views(K: np.ndarray, n: int, seed: int, *, max_tilt_deg: float = 4
     ts : list of (3,) translations (metres), board -> camera
     """
     rng = np.random.default_rng(seed)
-    board = DUCKIETOWN_BOARD
-    centre = board.object_points().mean(axis=0)
     Hs, Rs, ts = [], [], []
-    for _ in range(n):
-        axis = rng.normal(size=3)
-        axis[2] *= 0.3  # mostly tilt about axes in the image plane
-        axis /= np.linalg.norm(axis)
-        angle = np.deg2rad(rng.uniform(12.0, max_tilt_deg))
-        R = cv2.Rodrigues(axis * angle)[0]
-        z = rng.uniform(*distance)
-        aim = np.array([rng.uniform(-0.25, 0.25) * z, rng.uniform(-0.2, 0.2) * z, z])
-        t = aim - R @ centre  # the board centre lands at ``aim`` in the camera frame
-        H = K @ np.column_stack([R[:, 0], R[:, 1], t])
-        Hs.append(H / H[2, 2])
+    for _ in range(n):  # tilted mostly about axes in the image plane
+        R, t = random_board_pose(rng, DUCKIETOWN_BOARD, tilt_deg=(12.0, max_tilt_deg), distance=distance,
+                                 spread=(0.25, 0.2), axis_z=0.3)
+        Hs.append(board_homography(K, R, t))
         Rs.append(R)
         ts.append(t)
     return Hs, Rs, ts

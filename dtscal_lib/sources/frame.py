@@ -46,6 +46,10 @@ class Frame:
     name: str
     arrival: float | None = None
 
+    def __post_init__(self):
+        if self.image is None and self.error is None:  # every unusable frame says why
+            self.error = FrameError(Reason.UNREADABLE, f"{self.name}: the source gave no image")
+
     @property
     def ok(self) -> bool:
         """True when the frame decoded to an image."""

@@ -274,7 +274,7 @@ class RecordingLive(LiveSource):
                 if frame.ok:
                     self._push(frame.image, frame.stamp, frame.name)
                 else:
-                    self._push_bad(getattr(frame.error, "reason", None) or "unreadable")
+                    self._push_bad(frame.error.reason)
             if not self.loop:
                 break
         if not stop.is_set():

@@ -16,6 +16,8 @@ calibrate-extrinsics`` drives), keeping the best. SAVE writes the *best* homogra
 ``camera_extrinsic/<ROBOT>.yaml`` into the calibration folder (Duckietown's classic ``homography:``
 file, or version 2) through the session's gate: a homography the kit does not believe is refused
 as by the command line ("keep anyway" writes ``ROBOT.rejected.yaml`` beside, never uploaded).
+What happens to a frame and what SAVE does, without widgets, is
+:class:`~dtscal_lib.ui.extrinsic_driver.ExtrinsicDriver`; :class:`LiveExtrinsics` adds the widgets only.
 
 Examples
 --------
@@ -24,42 +26,17 @@ Examples
 
 from __future__ import annotations
 
-import threading
-import time
-from collections import Counter
-from pathlib import Path
-
 import cv2
 import numpy as np
 
-from .. import calib_files
-from ..boards import DUCKIETOWN_BOARD, Board, ground_points
-from ..camera import CameraModel, rectify_image
-from ..errors import DtscalError, ImplausibleCalibrationError, Reason
+from ..boards import DUCKIETOWN_BOARD, Board
 from ..ground import birdseye_view, draw_ground_grid, pixel_to_ground
-from ..session import ExtrinsicSession, robot_name
-from ..sources.live import open_live
 from . import render
-from .frameloop import DisplayPacer, FrameLoop, ack_widgets
-from .render import rectification_maps_fast
+from .extrinsic_driver import KEPT, ExtrinsicDriver, _MapsCamera  # noqa: F401  (_MapsCamera's home was here)
+from .frameloop import DisplayPacer, ack_widgets
 
 
-class _MapsCamera(CameraModel):
-    """A camera whose rectification maps are made once, by OpenCV (see
-    :func:`~dtscal_lib.ui.intrinsic.rectification_maps_fast`): :func:`extrinsics_from_image` asks
-    for them on every frame, and the kit's numpy maps cost ~0.1 s of CPU each time."""
-
-    def rectification_maps(self, new_K=None, size=None):
-        if new_K is not None or size is not None:
-            return super().rectification_maps(new_K, size)
-        maps = self.__dict__.get("_maps")
-        if maps is None:
-            maps = rectification_maps_fast(self)
-            object.__setattr__(self, "_maps", maps)
-        return maps
-
-
-class LiveExtrinsics:
+class LiveExtrinsics(ExtrinsicDriver):
     """Live ground (extrinsic) calibration of a camera source in JupyterLab.
 
     Parameters
@@ -77,25 +54,7 @@ class LiveExtrinsics:
                  autostart: bool = True):
         import ipywidgets as w
 
-        self.board = board
-        self.spec = str(getattr(source, "spec", source))
-        self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
-        if isinstance(intrinsics, (str, Path)):
-            intrinsics = calib_files.load_intrinsics(intrinsics).camera()
-        self._intrinsics = intrinsics
-        #: where the fits happen (the session the command line drives), keeping the best
-        self.session = ExtrinsicSession(None, board, keep="best", source=self.spec,
-                                        robot=robot_name(self.spec, self.source, robot) or "camera")
-        self.ground_true = ground_points(board)
-        self.current = None
-        self.reason = ""
-        self.bad: Counter = Counter()
-        self.frames_seen = 0
-        self.state = "connecting"
-        self._lock = threading.RLock()
-        self._maps_for = None
-        self._maps = None
-
+        super().__init__(source, intrinsics, board=board, robot=robot, realtime=realtime, loop=loop)
         lay = w.Layout
         self.status = w.HTML(render.message_html(f"connecting to {self.spec} ..."))
         self.image = w.Image(format="jpeg", layout=lay(width="480px"))
@@ -133,30 +92,19 @@ class LiveExtrinsics:
         self._pacer = DisplayPacer(self._display)
         self.widget.children = (*self.widget.children, ack_widgets(self._pacer))
         self.widget.add_class("dtscal-tool")
-        self._waiting_shown = 0.0
-        self._closed = threading.Event()
-        self.loop = FrameLoop(self.source, self._on_frame, self._on_status)
         if autostart:
             self.start()
 
     def start(self) -> None:
         """Start the frame loop, or, while there is no intrinsic calibration, once there is one:
         until then the tool waits without receiving or processing frames (an idle tool costs no CPU)."""
-        if self.camera() is not None:
-            self.loop.start()
-            return
+        super().start(on_wait=self._show_waiting)
+
+    def _show_waiting(self) -> None:
         self.status.value = render.message_html(
             f"{self.spec}: waiting for an intrinsic calibration (CALIBRATE in the calibrator above)")
         self.error_text.value = render.message_html(
             "waiting for an intrinsic calibration: CALIBRATE in the calibrator above", "error")
-
-        def wait():
-            while not self._closed.wait(0.2):
-                if self.camera() is not None:
-                    self.loop.start()
-                    return
-
-        threading.Thread(target=wait, daemon=True, name="dtscal-extrinsic-wait").start()
 
     def _repr_mimebundle_(self, **kw):
         bundle = self.widget._repr_mimebundle_(**kw)
@@ -164,97 +112,26 @@ class LiveExtrinsics:
         bundle["text/plain"] = "live extrinsic tool (shown as a widget in JupyterLab)"
         return bundle
 
-    # ------------------------------------------------------------------ the session's state
-    @property
-    def robot(self) -> str:
-        return self.session.robot
-
-    @robot.setter
-    def robot(self, name: str) -> None:
-        self.session.robot = name
-
-    @property
-    def best(self):
-        """The best fit so far (:class:`~dtscal_lib.ground.ExtrinsicResult`), or None."""
-        return self.session.best
-
-    @property
-    def best_frame(self) -> int:
-        return self.session.best_frame
-
-    # ------------------------------------------------------------------ intrinsics
-    def camera(self) -> CameraModel | None:
-        """The intrinsic calibration in use (None while a live calibrator has none yet)."""
-        src = self._intrinsics
-        if isinstance(src, CameraModel) or src is None:
-            return src
-        return src.camera()
-
-    def _rectify(self, img, cam: CameraModel) -> tuple[np.ndarray, CameraModel]:
-        """The rectified frame, and the camera with its maps made once (used for the fit too)."""
-        old = self._maps_for
-        same = (old is not None and np.array_equal(old.K, cam.K) and np.array_equal(old.dist, cam.dist)
-                and np.array_equal(old.P, cam.P) and old.size == cam.size)
-        if not same:
-            fast = _MapsCamera(cam.K, cam.dist, cam.size, cam.model, cam.P)
-            self._maps = fast.rectification_maps()
-            if old is not None:  # a new intrinsic calibration: fits made with the old one no longer count
-                self.reset_best()
-            self._maps_for = self.session.camera = fast
-        return rectify_image(img, self._maps), self._maps_for
-
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
-        self.state = st.state
-        self.status.value = render.source_status_html(self.spec, st, dict(st.bad), "The best fit is kept")
-
-    #: while there is no intrinsic calibration the tool idles: one camera frame per this many seconds
-    WAITING_PERIOD = 1.0
+        super()._on_status(st)
+        self.status.value = render.source_status_html(self.spec, st, dict(st.bad), KEPT)
 
     def _on_frame(self, frame) -> bool | None:
-        arrival = getattr(frame, "arrival", None) or time.time()  # frames made by hand have none
-        img = frame.image
-        if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-            self.bad["odd_frame"] += 1
+        """The loop body: the driver fits the frame; the views get it through the display pacer."""
+        got = self.take(frame)
+        if got is None:
             return False
-        self.frames_seen += 1
-        cam = self.camera()
-        if cam is None:  # idle: show the camera now and then, and let the loop rest (no CPU burnt)
-            now = time.monotonic()
-            if now - self._waiting_shown < self.WAITING_PERIOD:
-                self.loop.idle(self.WAITING_PERIOD / 4)
-                return False
-            self._waiting_shown = now
+        if got.reason is None:  # waiting for the intrinsics: the camera now and then, the loop rests
             self.error_text.value = render.message_html(
                 "waiting for an intrinsic calibration: CALIBRATE in the calibrator above", "error")
-            token = self._pacer.next_token()
-            self._pacer.offer(token, (img, None, None, -1, None, frame.index, arrival, token))
-            self.loop.idle(self.WAITING_PERIOD / 4)
-            return
-        if (img.shape[1], img.shape[0]) != cam.size:
-            self.bad["size_mismatch"] += 1
-            return False
-        rect, cam = self._rectify(img, cam)
-        offer = self.session.offer(frame, camera=cam)
-        res = offer.detection
-        if res is None and offer.reason == Reason.DETECTOR_ERROR:
-            self.reason = "OpenCV could not process this frame"
-            self.bad["detector_error"] += 1
-        elif res is None:
-            self.reason = str(self.session.last_error)
-        if res is not None:
-            with self._lock:
-                self.current = res
-                best = self.best
-            if self.save_button.disabled:
-                self.save_button.disabled = False
-        else:
-            with self._lock:
-                self.current = None
-                best = self.best
+        elif got.fit is not None and self.save_button.disabled:
+            self.save_button.disabled = False
         token = self._pacer.next_token()
-        reason = "" if res is not None else self.reason
-        self._pacer.offer(token, (rect, res, best, self.best_frame, reason, frame.index, arrival, token))
+        self._pacer.offer(token, (got.image, got.fit, got.best, got.best_frame, got.reason, frame.index,
+                                  got.arrival, token))
+        if got.reason is None:
+            self.loop.idle(self.WAITING_PERIOD / 4)
 
     def _display(self, payload) -> None:
         """Put one processed frame into the views (called by the display pacer): the camera view
@@ -288,7 +165,11 @@ class LiveExtrinsics:
             self.image.value = render.encode_jpeg(view)
             self.image._dom_classes = render.stamp_classes(index, arrival, token, "extrinsic")
 
-    # ------------------------------------------------------------------ actions
+    # ------------------------------------------------------------------ the buttons
+    def _say(self, text: str, kind: str = "info") -> str:
+        self.message.value = render.message_html(text, kind)
+        return text
+
     def save(self) -> str:
         """Write the best homography so far as ``camera_extrinsic/<ROBOT>.yaml`` in the folder
         (classic or version-2 format) and, with the target "robot", upload it to the robot.
@@ -296,53 +177,13 @@ class LiveExtrinsics:
         The session's gate comes first, as for ``dtscal calibrate-extrinsics``: a homography the kit does
         not believe is refused (nothing written); "keep anyway" writes it as ``<ROBOT>.rejected.yaml``
         beside the robot's file and never uploads it."""
-        with self._lock:
-            best, frame = self.best, self.best_frame
-        if best is None:
-            return self._say("nothing to save yet: no frame gave a fit", "error")
-        try:
-            path = self.session.write(self.folder_text.value.strip(), keep_anyway=bool(self.keep_anyway.value),
-                                      fmt=self.format.value)
-            text = (f"SAVE: wrote {path} (best fit, frame {frame}, mean error "
-                    f"{np.mean(best.residual_mm):.2f} mm)")
-            if self.session.doubts:
-                return self._say(text + "; kept against the kit's doubts: " + "; ".join(map(str, self.session.doubts))
-                                 + ". It is not sent to the robot.", "error")
-            if self.target.value == "robot":
-                text += "; " + self.session.commit(master_uri=getattr(self.source, "master", None),
-                                                   fmt=self.format.value)
-        except ImplausibleCalibrationError as exc:
-            doubts = "".join(f"<br>- {d}" for d in exc.doubts)
-            return self._say(f"SAVE refused: the kit does not believe this homography, nothing was written:{doubts}"
-                             "<br>Place the robot on the board as in the Duckietown procedure, or, as an expert, "
-                             f"tick \"keep anyway\" to keep it as {self.robot}{calib_files.REJECTED_SUFFIX}.yaml "
-                             "beside the robot's file.", "error")
-        except (DtscalError, OSError) as exc:
-            return self._say(f"SAVE failed: {exc}. The previous file is unchanged.", "error")
-        return self._say(text, "ok")
+        return self._say(*self.save_to(self.folder_text.value.strip(), keep_anyway=bool(self.keep_anyway.value),
+                                       fmt=self.format.value, target=self.target.value))
 
     def reset_best(self) -> None:
         """Forget the best fit (e.g. after moving the robot on the board)."""
-        self.session.forget()
+        super().reset_best()
         self.save_button.disabled = True
 
-    def _say(self, text: str, kind: str = "info") -> str:
-        self.message.value = render.message_html(text, kind)
-        return text
-
     def reconnect(self) -> str:
-        try:
-            self.loop.reconnect()
-        except DtscalError as exc:
-            return self._say(f"RECONNECT failed: {exc}", "error")
-        return self._say(f"reconnecting to {self.spec}")
-
-    def close(self) -> None:
-        self._closed.set()
-        self.loop.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+        return self._say(*self.reconnect_to())

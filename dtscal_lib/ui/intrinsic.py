@@ -14,9 +14,10 @@ SAVE writes the samples and the YAML into one zip that :meth:`LiveCalibrator.loa
 The calibration itself happens in a :class:`dtscal_lib.session.IntrinsicSession`, the same one
 ``dtscal calibrate-intrinsics`` drives: COMMIT goes through its gate, so the live tool refuses what
 the command line refuses (nothing written; "keep anyway" writes ``ROBOT.rejected.yaml`` beside, and
-never sends it to the robot). :class:`LiveCalibrator` holds the widgets and the threads; every
-button has a method of the same name, so the tool can be driven from Python (tests, scripts) as
-well as by clicks.
+never sends it to the robot). What happens to a frame and what each button does, without widgets, is
+:class:`~dtscal_lib.ui.intrinsic_driver.IntrinsicDriver`; :class:`LiveCalibrator` adds the widgets
+only. Every button has a method of the same name, so the tool can be driven from Python (tests,
+scripts) as well as by clicks.
 
 Examples
 --------
@@ -26,25 +27,14 @@ Examples
 
 from __future__ import annotations
 
-import time
-from collections import Counter
-from pathlib import Path
-
-import numpy as np
-
-from .. import calib_files
 from ..boards import DUCKIETOWN_BOARD, Board
-from ..camera import CameraModel
 from ..coverage import CoverageTracker
 from ..detect import draw_detection
-from ..errors import DtscalError, ImplausibleCalibrationError, Reason
-from ..session import MIN_SAMPLES, IntrinsicSession, robot_name
-from ..sources.live import open_live
+from ..session import robot_name
 from . import render
-from .archive import load_session, save_session
-from .frameloop import DisplayPacer, FrameLoop, ack_widgets
+from .frameloop import DisplayPacer, ack_widgets
+from .intrinsic_driver import KEPT, IntrinsicDriver
 from .render import rectification_maps_fast, verdict_html  # noqa: F401  (their home was here)
-from .background import BackgroundCalibration, PreviewMaps
 
 
 def robot_of(spec: str, source=None) -> str | None:
@@ -52,7 +42,7 @@ def robot_of(spec: str, source=None) -> str | None:
     return robot_name(spec, source)
 
 
-class LiveCalibrator:
+class LiveCalibrator(IntrinsicDriver):
     """Live intrinsic calibration of a camera source in JupyterLab.
 
     Parameters
@@ -73,28 +63,7 @@ class LiveCalibrator:
                  loop: bool = False, autostart: bool = True):
         import ipywidgets as w
 
-        self.board = board
-        self.model = model
-        self.spec = str(getattr(source, "spec", source))
-        self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
-        #: where the calibration happens (the same session the command line drives)
-        self.session = IntrinsicSession(board, model=model, first_size_wins=True, source=self.spec,
-                                        robot=robot_name(self.spec, self.source, robot) or "camera")
-        self.thumbs: list[bytes] = []
-        self.quality = None
-        self._calibrating_from = 0
-        self.bad: Counter = Counter()
-        self.frames_seen = 0
-        self.last_frame = None
-        self.state = "connecting"
-        self._lock = self.session.lock
-        # CALIBRATE runs off the frame loop, its solver in a helper process (solver.py: in a thread, it would
-        # stall the image); the preview's maps are made in a helper thread
-        self.background = BackgroundCalibration(self.session, on_result=self._calibrated, on_error=self._failed,
-                                                on_verdict=self._verdict, on_end=self._calibrate_ended)
-        self._preview = PreviewMaps(self._lock)
-
-        # ---- widgets
+        super().__init__(source, board=board, robot=robot, model=model, realtime=realtime, loop=loop)
         lay = w.Layout
         self.status = w.HTML(render.message_html(f"connecting to {self.spec} ..."))
         self.image = w.Image(format="jpeg", layout=lay(width="640px"))
@@ -143,67 +112,35 @@ class LiveCalibrator:
         self._pacer = DisplayPacer(self._display)
         self.widget.children = (*self.widget.children, ack_widgets(self._pacer))
         self.widget.add_class("dtscal-tool")
-        self.loop = FrameLoop(self.source, self._on_frame, self._on_status)
         if autostart:
             self.loop.start()
 
-    # ------------------------------------------------------------------ display
     def _repr_mimebundle_(self, **kw):
         bundle = self.widget._repr_mimebundle_(**kw)
         # the widget's own text form changes with every frame; this one is stable (stored outputs)
         bundle["text/plain"] = "live calibrator (shown as a widget in JupyterLab)"
         return bundle
 
-    # ------------------------------------------------------------------ state: the session's and the background's
-    robot = property(lambda self: self.session.robot, lambda self, name: setattr(self.session, "robot", name))
-    tracker = property(lambda self: self.session.tracker, lambda self, t: setattr(self.session, "tracker", t),
-                       doc="the coverage (samples, bars) of the session")
-    result = property(lambda self: self.session.result, doc="the CalibrationResult, None before CALIBRATE")
-    dropped = property(lambda self: self.session.dropped, doc="views dropped as outliers by the last CALIBRATE")
-    calibrating = property(lambda self: self.background.busy)
-    calibrate_error = property(lambda self: self.background.error)
-    calibrate_seconds = property(lambda self: self.background.seconds)
-    _solver = property(lambda self: self.background.solver)
-    _preview_key = property(lambda self: self._preview.key)
-    _preview_maps = property(lambda self: self._preview.maps)
-
     # ------------------------------------------------------------------ frame loop
     def _on_status(self, st) -> None:
-        self.state = st.state
-        self.status.value = render.source_status_html(self.spec, st, {**st.bad, **self.bad}, "Every sample is kept")
+        super()._on_status(st)
+        self.status.value = render.source_status_html(self.spec, st, {**st.bad, **self.bad}, KEPT)
 
     def _on_frame(self, frame) -> bool | None:
-        """The loop body: detect, offer to coverage, draw, encode, publish (False: frame skipped)."""
-        arrival = getattr(frame, "arrival", None) or time.time()  # frames made by hand have none
-        img = frame.image
-        if img is None or img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-            return self._skip("odd_frame")
-        offer = self.session.offer(frame)
-        if offer.reason == Reason.SIZE_MISMATCH:
-            return self._skip("size_mismatch")
-        if offer.detection is None:  # the detector could not take the frame
-            return self._skip("detector_error")
-        det, added = offer.detection, offer.added
-        with self._lock:
-            if added:
-                self.thumbs.append(render.thumbnail(img, det.corners))
-            n = len(self.tracker.samples)
-            ready = self.tracker.ready()
-            bars = self.tracker.bars() if added else None
-        if added and n >= MIN_SAMPLES:
-            self.prepare_calibration()
-        self.frames_seen += 1
-        self.last_frame = img
-        drawn = draw_detection(img, det)
+        """The loop body: the driver takes the frame (detect, offer); draw, publish (False: frame skipped)."""
+        got = self.take(frame)
+        if got is None:
+            self.count.value = self.skipped_text()
+            return False
         token = self._pacer.next_token()
-        self._pacer.offer(token, (drawn, img, frame.index, arrival, token))
-        if added:
-            self.bars.value = render.bars_html(bars)
-            self.count.value = f"samples: {n}"
-            self._add_thumb(n - 1)
-        enable = ready and not self.background.busy and n >= MIN_SAMPLES
-        if self.calibrate_button.disabled == enable:
-            self.calibrate_button.disabled = not enable
+        self._pacer.offer(token, (draw_detection(got.image, got.detection), got.image, frame.index, got.arrival,
+                                  token))
+        if got.added:
+            self.bars.value = render.bars_html(got.bars)
+            self.count.value = f"samples: {got.n}"
+            self._add_thumb(got.n - 1)
+        if self.calibrate_button.disabled == got.ready:
+            self.calibrate_button.disabled = not got.ready
 
     def _display(self, payload) -> None:
         """Put one processed frame into the widgets (called by the display pacer): the image with
@@ -217,14 +154,6 @@ class LiveCalibrator:
         if out is not None:
             self.preview.value = render.encode_jpeg(out)
 
-    def _skip(self, reason: str) -> bool:
-        """Count a frame the calibrator cannot use (the count shows under the bars); returns False."""
-        self.bad[reason] += 1
-        n = len(self.tracker.samples) if self.tracker else 0
-        self.count.value = f"samples: {n}; frames skipped: " + ", ".join(
-            f"{k} {v}" for k, v in sorted(self.bad.items()))
-        return False
-
     def _add_thumb(self, i: int) -> None:
         import ipywidgets as w
 
@@ -234,7 +163,10 @@ class LiveCalibrator:
         b.on_click(lambda _b, box=box: self.drop_sample(list(self.thumb_box.children).index(box)))
         self.thumb_box.children = (*self.thumb_box.children, box)
 
-    def _rebuild_thumbs(self) -> None:
+    def _show_samples(self, bars, n: int) -> None:
+        """The bars, the count and every thumbnail anew (a sample dropped, an archive loaded)."""
+        self.bars.value = render.bars_html(bars)
+        self.count.value = f"samples: {n}"
         old, self.thumb_box.children = self.thumb_box.children, ()
         for box in old:  # close the widgets too, or the kernel keeps their models
             for child in box.children:
@@ -242,49 +174,11 @@ class LiveCalibrator:
             box.close()
         for i in range(len(self.thumbs)):
             self._add_thumb(i)
-
-    # ------------------------------------------------------------------ actions
-    @property
-    def samples(self):
-        return [] if self.tracker is None else list(self.tracker.samples)
-
-    def drop_sample(self, i: int) -> None:
-        """Forget sample ``i`` (0-based): its thumbnail goes, the bars are recomputed."""
-        with self._lock:
-            if self.tracker is None or not 0 <= i < len(self.tracker.samples):
-                return
-            del self.tracker.samples[i]
-            del self.thumbs[i]
-            bars, n = self.tracker.bars(), len(self.tracker.samples)
-        self.bars.value = render.bars_html(bars)
-        self.count.value = f"samples: {n}"
-        self._rebuild_thumbs()
         self.calibrate_button.disabled = not self.background.can_start()
 
-    def calibrate(self, wait: bool = False):
-        """Calibrate from the samples in a background thread; ``wait=True`` blocks until done.
-
-        Returns the ``CalibrationResult`` (``wait=True``) or the thread. A failure (too few or
-        degenerate samples) is shown in the results panel; the previous calibration stays.
-        """
-        with self._lock:
-            if not self.background.busy:
-                self.calibrate_button.disabled = True
-                self._calibrating_from = len(self.samples)
-                self.results.value = render.message_html(f"calibrating from {self._calibrating_from} samples ...")
-            job = self.background.start(self.prepare_calibration)
-        if wait:
-            job.join()
-            return self.result
-        return job
-
-    def prepare_calibration(self, wait: float = 0.0) -> bool:
-        """Start the calibration process ahead of CALIBRATE (done by itself at 3 samples); True when ready."""
-        return self.background.prepare(wait)
-
+    # ------------------------------------------------------------------ CALIBRATE's news (from its thread)
     def _calibrated(self, result) -> None:
-        with self._lock:
-            self.quality = None
+        super()._calibrated(result)
         # the preview's maps are made here, in the calibration's thread: the frame loop never builds them
         self._preview.build(result, float(self.alpha.value), lambda: self.result)
         self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from)
@@ -296,8 +190,7 @@ class LiveCalibrator:
 
     def _verdict(self, result, quality) -> None:
         """The verdict follows the result (it can take longer than the calibration)."""
-        with self._lock:
-            self.quality = quality
+        super()._verdict(result, quality)
         verdict = verdict_html(quality)
         if verdict:
             self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from, verdict)
@@ -305,17 +198,32 @@ class LiveCalibrator:
     def _calibrate_ended(self) -> None:
         self.calibrate_button.disabled = not self.background.can_start()
 
-    def camera(self) -> CameraModel | None:
-        """The calibrated camera (``P`` with alpha 0, as ROS sets it), or None before CALIBRATE."""
-        return self.session.camera
-
-    def calibration(self) -> calib_files.IntrinsicCalibration | None:
-        """The content of ``camera_intrinsic/<ROBOT>.yaml`` (None before CALIBRATE)."""
-        return self.session.calibration()
-
+    # ------------------------------------------------------------------ the buttons
     def _say(self, text: str, kind: str = "info") -> str:
         self.message.value = render.message_html(text, kind)
         return text
+
+    def drop_sample(self, i: int) -> None:
+        """Forget sample ``i`` (0-based): its thumbnail goes, the bars are recomputed."""
+        shown = self.drop(i)
+        if shown is not None:
+            self._show_samples(*shown)
+
+    def calibrate(self, wait: bool = False):
+        """Calibrate from the samples in a background thread; ``wait=True`` blocks until done.
+
+        Returns the ``CalibrationResult`` (``wait=True``) or the thread. A failure (too few or
+        degenerate samples) is shown in the results panel; the previous calibration stays.
+        """
+        def started(n: int) -> None:
+            self.calibrate_button.disabled = True
+            self.results.value = render.message_html(f"calibrating from {n} samples ...")
+
+        job = self.start_calibration(started)
+        if wait:
+            job.join()
+            return self.result
+        return job
 
     def commit(self) -> str:
         """Write ``camera_intrinsic/<ROBOT>.yaml`` into the calibration folder and, with the
@@ -327,79 +235,20 @@ class LiveCalibrator:
         why; the previous file on the robot or in the folder is unchanged, and SAVE still keeps the new
         calibration.
         """
-        if self.result is None:
-            return self._say("nothing to commit yet: CALIBRATE first", "error")
-        keep = bool(self.keep_anyway.value)
-        try:
-            path = self.session.write(self.folder_text.value.strip(), keep_anyway=keep)
-            if self.session.doubts:
-                return self._say(f"COMMIT: kept as {path} beside the robot's file, against the kit's doubts: "
-                                 + "; ".join(map(str, self.session.doubts)) + ". It is not sent to the robot.", "error")
-            if self.commit_target.value == "folder":
-                return self._say(f"COMMIT: wrote {path} (the previous file, if any, is kept as .bak)", "ok")
-            answer = self.session.commit(master_uri=getattr(self.source, "master", None))
-            return self._say(f"COMMIT to {self.robot}: {answer} (local copy: {path})", "ok")
-        except ImplausibleCalibrationError as exc:
-            doubts = "".join(f"<br>- {d}" for d in exc.doubts)
-            return self._say(f"COMMIT refused: the kit does not believe this calibration, nothing was written "
-                             f"and nothing sent:{doubts}<br>Collect more varied samples and CALIBRATE again, or, as "
-                             f"an expert, tick \"keep anyway\" to keep it as {self.robot}"
-                             f"{calib_files.REJECTED_SUFFIX}.yaml beside the robot's file.", "error")
-        except (DtscalError, OSError) as exc:
-            return self._say(f"COMMIT failed: {exc}. The previous calibration is unchanged; "
-                             "SAVE still keeps this one.", "error")
+        return self._say(*self.commit_to(self.folder_text.value.strip(), keep_anyway=bool(self.keep_anyway.value),
+                                         target=self.commit_target.value))
 
     def save(self, path=None) -> str:
         """Write the samples (and the calibration, if any) into one zip archive."""
-        path = Path(path or self.archive_text.value.strip() or f"{self.robot}_session.zip")
-        if self.tracker is None:
-            return self._say("nothing to save yet: no frame has arrived", "error")
-        with self._lock:
-            samples = list(self.tracker.samples)
-        try:
-            out = save_session(path, board=self.board, image_size=self.tracker.image_size, robot=self.robot,
-                               samples=samples, calibration=self.calibration())
-        except DtscalError as exc:
-            return self._say(f"SAVE failed: {exc}", "error")
-        return self._say(f"SAVE: {len(samples)} samples" + (" and the calibration" if self.result else "")
-                         + f" in {out}", "ok")
+        return self._say(*self.save_to(path or self.archive_text.value.strip()))
 
     def load(self, path) -> str:
         """Replace the samples by those of a SAVE archive (CALIBRATE again to recalibrate)."""
-        try:
-            arch = load_session(path)
-        except DtscalError as exc:
-            return self._say(f"LOAD failed: {exc}", "error")
-        if arch.board != self.board:
-            return self._say(f"LOAD failed: the archive is for a {arch.board.describe()} board, this "
-                             f"calibrator uses {self.board.describe()}", "error")
-        with self._lock:
-            if self.tracker is None or self.tracker.image_size != arch.image_size:
-                self.tracker = CoverageTracker(self.board, arch.image_size)
-            self.tracker.samples = list(arch.samples)
-            self.thumbs = [render.outline_thumb(s.corners, arch.image_size) for s in arch.samples]
-            bars, n = self.tracker.bars(), len(arch.samples)
-        self.bars.value = render.bars_html(bars)
-        self.count.value = f"samples: {n}"
-        self._rebuild_thumbs()
-        self.calibrate_button.disabled = not self.background.can_start()
-        return self._say(f"loaded {n} samples from {path}; CALIBRATE to recalibrate", "ok")
+        text, kind, shown = self.load_from(path)
+        if shown is not None:
+            self._show_samples(*shown)
+        return self._say(text, kind)
 
     def reconnect(self) -> str:
         """Re-open the source; samples and calibration are kept."""
-        try:
-            self.loop.reconnect()
-        except DtscalError as exc:
-            return self._say(f"RECONNECT failed: {exc}", "error")
-        return self._say(f"reconnecting to {self.spec}; {len(self.samples)} samples kept")
-
-    def close(self) -> None:
-        """Stop the frame loop, close the source and end the calibration process."""
-        self.loop.close()
-        self.background.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+        return self._say(*self.reconnect_to())
