@@ -67,29 +67,28 @@ __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "re
 #: no detector measures corners of an 8-bit image much better than this (pixels, per coordinate);
 #: the noise used in the ratios never goes below it (exact synthetic points would divide by 0)
 NOISE_FLOOR_PX = 0.01
-#: residual sigma / corner noise: above the first the fit is doubtful, above the second bad
-FIT_RATIO_DOUBTFUL, FIT_RATIO_BAD = 1.5, 3.0
-#: a view whose RMS exceeds this many times the median view's fits "far worse than the others"
-VIEW_OUTLIER_FACTOR = 3.0
-#: a column/row mean offset counts when it is this many standard errors from 0 (and at least the noise)
-OFFSET_Z = 6.0
-#: ... in at least this share of the views (and in at least 2 views) it is a systematic offset
-OFFSET_VIEW_SHARE = 0.25
-#: a radial residual bias (mean over a radius band) counts above this many standard errors and
-#: above this fraction of the corner noise
-RADIAL_Z, RADIAL_FRACTION = 6.0, 0.5
-#: mean correlation of the residual vectors of grid-neighbouring corners that counts as shared error
-NEIGHBOUR_CORRELATION = 0.5
-#: residuals this many times the noise, shared by neighbouring corners, are a bad (not doubtful) pattern
-SYSTEMATIC_RATIO_BAD = 2.0
-#: fewer views than this cannot tell a bad view from the rest
-MIN_GOOD_VIEWS = 6
-#: largest angle between a board normal and the mean normal, degrees: below the first bad, the second doubtful
-#: (rows of the one table of belief, with the refusal's limit: dtscal_lib.limits)
-from .limits import TILT_BAD_DEG, TILT_DOUBTFUL_DEG  # noqa: E402
-#: mean 1-sigma projection uncertainty at the image corners, pixels: above the first doubtful, the second bad
-#: (the image corners are extrapolated: no board corner is ever detected there)
-CORNER_SIGMA_DOUBTFUL, CORNER_SIGMA_BAD = 1.0, 4.0
+#: the verdict's thresholds, each once in the one table of belief with its reason and data (dtscal_lib.limits):
+#: residual sigma / corner noise (doubtful, bad); a view's RMS / the median view's; a grid line's offset in
+#: standard errors and the share of views; a radial bias in standard errors and fraction of the noise; the
+#: correlation of neighbouring corners' residuals; a shared pattern / noise that is bad; the fewest views that
+#: can tell a bad view; the boards' tilt (bad, doubtful); the mean 1-sigma projection uncertainty at the image
+#: corners, pixels (doubtful, bad)
+from .limits import (  # noqa: E402
+    CORNER_SIGMA_BAD,
+    CORNER_SIGMA_DOUBTFUL,
+    FIT_RATIO_BAD,
+    FIT_RATIO_DOUBTFUL,
+    MIN_GOOD_VIEWS,
+    NEIGHBOUR_CORRELATION,
+    OFFSET_VIEW_SHARE,
+    OFFSET_Z,
+    RADIAL_FRACTION,
+    RADIAL_Z,
+    SYSTEMATIC_RATIO_BAD,
+    TILT_BAD_DEG,
+    TILT_DOUBTFUL_DEG,
+    VIEW_OUTLIER_FACTOR,
+)
 
 #: a Duckiebot's camera over the ground, as the shipped default extrinsic homography says it is
 #: (duckietown.md's ``camera_extrinsic/default.yaml`` with the default P, read back through

@@ -19,9 +19,11 @@ if [ "$(id -u)" -ne 0 ]; then
     fi
 fi
 export DEBIAN_FRONTEND=noninteractive
+# shellcheck source=apt-wait.sh
+source "$(dirname "$0")/apt-wait.sh"   # wait for another apt-get instead of failing
 if ! apt-cache policy chromium 2>/dev/null | grep -q 'Candidate: [0-9]'; then
-    $SUDO apt-get update
+    apt_get install-browser update
 fi
-$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends chromium
+apt_get install-browser install -y --no-install-recommends chromium
 command -v chromium >/dev/null 2>&1 || { echo "install-browser: chromium still missing after apt-get" >&2; exit 1; }
 echo "install-browser: done; chromium at $(command -v chromium)"

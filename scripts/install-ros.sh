@@ -32,11 +32,13 @@ if [ "$(id -u)" -ne 0 ]; then
 fi
 
 export DEBIAN_FRONTEND=noninteractive
+# shellcheck source=apt-wait.sh
+source "$(dirname "$0")/apt-wait.sh"   # wait for another apt-get instead of failing
 
 # refresh the package lists only when apt does not know the packages yet
 if ! apt-cache policy ros-core 2>/dev/null | grep -q 'Candidate: [0-9]'; then
     echo "install-ros: apt does not know ros-core yet; running apt-get update"
-    $SUDO apt-get update
+    apt_get install-ros update
 fi
 
 missing=()
@@ -48,7 +50,7 @@ done
 
 if [ "${#missing[@]}" -gt 0 ]; then
     echo "install-ros: installing ${missing[*]}"
-    $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
+    apt_get install-ros install -y --no-install-recommends "${missing[@]}"
 fi
 
 if have_all; then

@@ -47,6 +47,8 @@ def test_ground_points_match_duckietown_placement():
     np.testing.assert_allclose(g[:, 0].max(), 0.191 + 4 * 0.031)
     # the printed board's outer corner is one square outside the inner-corner grid
     np.testing.assert_allclose([g[:, 0].min() - 0.031, g[:, 1].min() - 0.031], [0.160, -0.124], atol=1e-12)
+    k = np.arange(35)  # every corner: point k = (x0 + (k // cols) * square, y0 + (k % cols) * square)
+    np.testing.assert_allclose(g, np.column_stack([0.191 + (k // 7) * 0.031, -0.093 + (k % 7) * 0.031]), atol=1e-12)
 
 
 def _fake_image_of_ground_board():

@@ -3,14 +3,17 @@
 Run all; the bars fill from the bundled recording; CALIBRATE, then COMMIT to a temporary
 calibration folder; the YAML is within 0.3 % of the truth. The extrinsic tool then fits the
 ground homography live; SAVE writes the best one, which maps the board corners within 3 mm.
-The latency from a frame's arrival in the kernel to its display in the page is measured from
-the arrival stamp the calibrator puts on every image, to the animation frame after the image's
-load event (median under 100 ms), from the first live image until the bars are full. Screenshots are kept
-in a folder under the system's temporary folder (the path is printed).
+While the bars fill, every live image the page loads is recorded with the arrival stamp the
+calibrator puts on it: at least 20 are displayed, and in the order they arrived (an older frame
+never replaces a newer one in the page). How long a frame takes from its arrival in the kernel to
+its display is a figure of the machine's load, not a property of the code: it is printed here and
+measured by ``benchmarks/bench_browser.py``, never asserted. Screenshots are kept in a folder under
+the system's temporary folder (the path is printed).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import secrets
 import shutil
@@ -75,7 +78,14 @@ def _free_port() -> int:
 
 @pytest.fixture()
 def lab(tmp_path):
-    """JupyterLab on 127.0.0.1 with a temporary root holding notebook 06; yields (url, root)."""
+    """JupyterLab on 127.0.0.1 with a temporary root holding notebook 06; yields (url, token, root)."""
+    with jupyterlab(tmp_path) as running:
+        yield running
+
+
+@contextlib.contextmanager
+def jupyterlab(tmp_path: Path):
+    """JupyterLab on 127.0.0.1 with a temporary root holding notebook 06 (also used by benchmarks/bench_browser.py)."""
     root = tmp_path / "root"
     root.mkdir()
     shutil.copy(NOTEBOOK, root / NOTEBOOK.name)
@@ -99,7 +109,7 @@ def lab(tmp_path):
             except OSError:
                 if proc.poll() is not None or time.monotonic() > end:
                     log.flush()
-                    pytest.fail(f"JupyterLab did not start: {(tmp_path / 'jupyterlab.log').read_text()[-2000:]}")
+                    raise RuntimeError(f"JupyterLab did not start: {(tmp_path / 'jupyterlab.log').read_text()[-2000:]}")
                 time.sleep(0.5)
         yield url, token, root
     finally:
@@ -213,7 +223,9 @@ def test_notebook_06_calibrates_commits_and_saves_extrinsics_in_the_browser(lab,
             print(f"{tool} tool, frame arrival -> display in the browser over {len(painted)} images: painted median "
                   f"{np.median(painted):.1f} ms, p90 {np.percentile(painted, 90):.1f} ms (loaded: median "
                   f"{np.median(loaded):.1f} ms, p90 {np.percentile(loaded, 90):.1f} ms)")
-    loaded, painted = latency_summary(lat, "intrinsic")
-    assert len(painted) >= 20, f"only {len(painted)} frames displayed while the bars filled"
-    median = float(np.median(painted))
-    assert median < 100, f"median latency {median:.1f} ms"
+    intrinsic = [x for x in lat if x[0] == "intrinsic"]
+    assert len(intrinsic) >= 20, f"only {len(intrinsic)} frames displayed while the bars filled"
+    arrivals = [x[1] for x in intrinsic]
+    # the newest frame wins: images are displayed in the order the frames arrived, none goes back in time
+    assert all(b >= a for a, b in zip(arrivals, arrivals[1:])), arrivals
+    assert len(set(arrivals)) >= 20, arrivals  # distinct frames, not one image loaded again and again

@@ -9,7 +9,7 @@ import pytest
 from dtscal_lib import camera as cam
 from dtscal_lib.selfcheck import NOT_IMPLEMENTED, PASS
 from dtscal_lib.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
-from test_selfcheck_course import (_quiet, p2g_no_divide, p2g_transposed, ref_intrinsics, ref_p2g, status,
+from selfcheck_refs import (_quiet, p2g_no_divide, p2g_transposed, ref_intrinsics, ref_p2g, status,
                                    stub)
 
 # =========================================================================== the notebooks' plumbing

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import time
 
 import pytest
 
@@ -123,17 +122,18 @@ def test_misbehaviour_costs_only_that_function(tmp_path, material, kind):
     body, expect = MISBEHAVIOURS[kind]
     before = hashlib.sha256(GRADING_CASES.read_bytes()).hexdigest()
     sub = _submission(tmp_path, kind, body)
-    t0 = time.perf_counter()
     res = grade_file(sub, material, "02_homography", wall_s=3.0, cpu_s=2, mem_mb=1500)
-    took = time.perf_counter() - t0
     apply_, estimate = res.functions
     report = text(res)
     assert estimate.score == estimate.max_score, report
     assert apply_.score < apply_.max_score, report
     assert any(e in report for e in ((expect,) if isinstance(expect, str) else expect)), report
     assert "640173" not in report  # nothing of the grading material reaches the feedback
-    # within the limits: at most ~(wall + restart) per check of apply_homography (5 checks + the probe)
-    assert took < 6 * 3.0 + 30, took
+    if kind in ("sleep_forever", "infinite_loop"):
+        # a limit, not the test's patience, ended each check: every check of apply_homography reports it
+        # (the submission sleeps 10^6 s or loops forever; a limit that did not fire would hang until
+        # pytest-timeout's safety net, 600 s, and fail)
+        assert all(expect in t.output for t in apply_.tests), report
     out = write_json(tmp_path / "results.json", gradescope([res]))
     data = json.loads(out.read_text())
     assert len(data["tests"]) == 11 and data["score"] == res.score

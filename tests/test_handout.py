@@ -12,7 +12,7 @@ import pytest
 
 from dtscal_lib import release as rel
 from nbtools import ROOT, SOLUTIONS
-from test_course_command import _free_port, _stop, check_student_view
+from course_server import _free_port, _stop, check_student_view
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,7 @@
-"""End-to-end: every student notebook runs, reports "not implemented yet", and passes once solved."""
+"""End-to-end: every student notebook runs, reports "not implemented yet", and passes once solved.
+
+How long a notebook takes is measured by ``benchmarks/bench_notebooks.py`` (against an empty notebook's
+run in the same process), never asserted here; nbclient's per-cell timeout is only a safety net."""
 
 from __future__ import annotations
 
@@ -6,7 +9,7 @@ import nbformat
 import pytest
 
 from dtscal_lib.release import inject_solutions
-from nbtools import (COURSE, NOTEBOOK_BUDGET_S, NOTEBOOKS, SOLUTIONS, cell_errors, execute, execute_student_once,
+from nbtools import (COURSE, NOTEBOOKS, SOLUTIONS, cell_errors, execute, execute_student_once,
                      exercise_functions, need, reports)
 
 pytestmark = pytest.mark.slow
@@ -18,23 +21,21 @@ def _student(name):
 
 @pytest.mark.parametrize("name", COURSE)
 def test_untouched_student_notebook_runs_and_reports_not_implemented(name, notebook_runs):
-    nb, seconds = execute_student_once(name, notebook_runs)  # the run test_notebook_text also checks
+    nb, _ = execute_student_once(name, notebook_runs)  # the run test_notebook_text also checks
     assert not cell_errors(nb), f"{name}: errors escaped cells: {cell_errors(nb)}"
     found = reports(nb)
     wanted = exercise_functions(nb)
     assert wanted, f"{name}: no exercise cells"
     assert {f for _, f in found} >= set(wanted), f"{name}: checks missing for {set(wanted) - {f for _, f in found}}"
     assert all(mark == " " for mark, _ in found), f"{name}: expected only 'not implemented yet', got {found}"
-    assert seconds < NOTEBOOK_BUDGET_S, f"{name} took {seconds:.1f} s (budget {NOTEBOOK_BUDGET_S:g} s)"
 
 
 @pytest.mark.parametrize("name", COURSE)
 def test_pasted_solutions_pass_every_check(name):
     solution = nbformat.read(need(SOLUTIONS / f"{name}.ipynb"), as_version=4)
-    nb, seconds = execute(inject_solutions(_student(name), solution))
+    nb, _ = execute(inject_solutions(_student(name), solution))
     assert not cell_errors(nb), f"{name}: errors escaped cells: {cell_errors(nb)}"
     found = reports(nb)
     wanted = exercise_functions(nb)
     assert {f for _, f in found} >= set(wanted), f"{name}: checks missing for {set(wanted) - {f for _, f in found}}"
     assert all(mark == "x" for mark, _ in found), f"{name}: not every check passed: {found}"
-    assert seconds < NOTEBOOK_BUDGET_S, f"{name} took {seconds:.1f} s (budget {NOTEBOOK_BUDGET_S:g} s)"

@@ -63,9 +63,30 @@ def _pyplot_figures():
     return mod.get_fignums() if mod else []
 
 
-def test_figures_compute_the_verdict_when_not_given(good):
-    res, _ = good
-    assert isinstance(report.fig_coverage(res), Figure)
+@pytest.fixture(scope="module")
+def one_bad_view():
+    """The good session's poses with one view's corners 20x noisier: the verdict names that view."""
+    frames = [f for f in datasets.load_truth()["intrinsics"]["frames"] if f["board_visible"]][::6]
+    views = _views([(f["rvec"], f["tvec"]) for f in frames])
+    rng = np.random.default_rng(5)
+    views[3] = views[3] + rng.normal(0, 1.0, views[3].shape)  # 1 px against 0.05 px elsewhere
+    res = calibrate([OBJ] * len(views), views, dt.IMAGE_SIZE)
+    return res, res.quality()
+
+
+def _red_bars(fig) -> list[int]:
+    from matplotlib.colors import to_hex
+
+    return [i for i, bar in enumerate(fig.axes[0].patches) if to_hex(bar.get_facecolor()) == "#c62828"]
+
+
+def test_figures_show_the_verdict_and_compute_it_when_not_given(good, one_bad_view):
+    res, q = one_bad_view
+    named = sorted(v for f in q.findings if f.code == "outlier_views" for v in f.views)
+    assert q.verdict != "good" and named == [3], (q.verdict, [(f.code, f.views) for f in q.findings])
+    assert _red_bars(report.fig_view_rms(res, q)) == [3]  # the view the verdict names is the red one
+    assert _red_bars(report.fig_view_rms(res)) == [3]  # the same verdict, computed by the figure itself
+    assert _red_bars(report.fig_view_rms(*good)) == []  # a good calibration: nothing in red
 
 
 def test_write_report_writes_the_figures_and_a_page_with_the_verdict(parallel, tmp_path):

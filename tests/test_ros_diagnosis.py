@@ -18,16 +18,13 @@ import time
 from pathlib import Path
 
 import pytest
-import test_ros_bag_play
-from test_ros_bag_play import _free_port, _log, _ros_tool, _started
-from test_ros_live import ROBOT, TOPIC, _wait
+from ros_env import ROBOT, _free_port, _log, _ros_tool, _started, _wait
 
 from dtscal_lib import datasets
 from dtscal_lib.sources import live, open_live
 
 pytestmark = pytest.mark.slow
-ros_ok = test_ros_bag_play.ros_ok
-roscore = test_ros_bag_play.roscore
+TOPIC = f"/{ROBOT}/camera_node/image/compressed"
 
 
 def _sentence(monkeypatch, spec: str, env: dict, *, master: str | None = None, wait_for=("error",)) -> str:

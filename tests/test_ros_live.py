@@ -5,7 +5,8 @@ Duckiebot's camera node does. The kit calibrates from the live topic, commits, a
 is checked against the ground truth of the recording. Then the faults: the master killed mid-session,
 the bag ending, COMMIT with no service or no master.
 
-Helpers (roscore, process groups, the ROS environment) come from ``test_ros_bag_play``.
+Helpers (roscore, process groups, the ROS environment, the camera node) come from ``ros_env.py``, the
+fixtures ``roscore`` and ``file_server`` from conftest.py.
 """
 
 from __future__ import annotations
@@ -16,24 +17,13 @@ import os
 import signal
 import subprocess
 import sys
-import textwrap
-import time
-import xmlrpc.client
 from pathlib import Path
 
 import numpy as np
 import pytest
-import test_live_sources
-import test_ros_bag_play
-from test_ros_bag_play import (
-    SYSTEM_PYTHON,
-    _free_port,
-    _log,
-    _ros_tool,
-    _run,
-    _started,
-    running_roscore,
-)
+from live_fakes import write_test_bag
+from ros_env import (CAMERA_NODE, ROBOT, SYSTEM_PYTHON, _free_port, _kill_master, _log, _ros_tool, _run, _started,
+                     _subscribers, _wait, running_roscore)
 
 from dtscal_lib import calib_files, datasets
 from dtscal_lib import duckietown as dt
@@ -42,57 +32,7 @@ from dtscal_lib.sources import open_live
 
 pytestmark = pytest.mark.slow
 
-# fixtures shared with the other tests
-ros_ok = test_ros_bag_play.ros_ok
-roscore = test_ros_bag_play.roscore
-file_server = test_live_sources.file_server
-
-ROBOT = "synthbot"
 TOPIC = f"/{ROBOT}/camera_node/image/compressed"
-
-CAMERA_NODE = textwrap.dedent('''
-    """A Duckiebot camera node's calibration side: set_camera_info writes camera_intrinsic/<ROBOT>.yaml."""
-    import os, sys
-    import rospy, yaml
-    from sensor_msgs.srv import SetCameraInfo, SetCameraInfoResponse
-
-    robot, root = sys.argv[1], sys.argv[2]
-
-    def on_set(req):
-        c = req.camera_info
-        doc = {"image_width": c.width, "image_height": c.height, "camera_name": "/" + robot + "/camera_node",
-               "camera_matrix": {"rows": 3, "cols": 3, "data": list(c.K)},
-               "distortion_model": c.distortion_model,
-               "distortion_coefficients": {"rows": 1, "cols": len(c.D), "data": list(c.D)},
-               "rectification_matrix": {"rows": 3, "cols": 3, "data": list(c.R)},
-               "projection_matrix": {"rows": 3, "cols": 4, "data": list(c.P)}}
-        path = os.path.join(root, "camera_intrinsic", robot + ".yaml")
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        with open(path, "w") as f:
-            yaml.safe_dump(doc, f)
-        return SetCameraInfoResponse(success=True, status_message="Write to " + path)
-
-    rospy.init_node("camera_node", argv=["camera_node", "__ns:=/" + robot], disable_signals=True)
-    rospy.Service("/" + robot + "/camera_node/set_camera_info", SetCameraInfo, on_set)
-    print("READY", flush=True)
-    rospy.spin()
-''')
-
-
-def _wait(pred, timeout: float, what: str, interval: float = 0.1):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        v = pred()
-        if v:
-            return v
-        time.sleep(interval)
-    pytest.fail(f"timed out after {timeout} s waiting for {what}")
-
-
-def _subscribers(env, topic: str) -> int:
-    _code, _msg, state = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"]).getSystemState("/dtscal_test")
-    return sum(len(nodes) for name, nodes in state[1] if name == topic)
-
 
 def _kit_env(env) -> dict:
     """The kit's own environment (its venv) pointed at the test's master."""
@@ -157,28 +97,6 @@ def test_calibrate_from_live_topic_and_commit(roscore, camera_node, tmp_path):
     print(f"samples {run['samples_used']}, frames {run['frames']}")
 
 
-def _node_pid(uri: str) -> int:
-    return xmlrpc.client.ServerProxy(uri).getPid("/dtscal_test")[2]
-
-
-def _kill_master(env) -> None:
-    """SIGKILL rosmaster and rosout (roslaunch runs them in sessions of their own), as a crash would."""
-    master = xmlrpc.client.ServerProxy(env["ROS_MASTER_URI"])
-    pids = [_node_pid(env["ROS_MASTER_URI"]), _node_pid(master.lookupNode("/dtscal_test", "/rosout")[2])]
-    for pid in pids:
-        os.kill(pid, signal.SIGKILL)
-    for pid in pids:
-        _wait(lambda pid=pid: not _alive(pid), 10, f"pid {pid} to die")
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split(")")[-1].split()[0] != "Z"  # a zombie is dead
-    except FileNotFoundError:
-        return False
-
-
 def test_master_killed_mid_session_then_reconnect(ros_ok, tmp_path):
     home = tmp_path / "home"
     port = _free_port()
@@ -237,13 +155,12 @@ def test_commit_without_service_or_master_is_a_clear_error(roscore, tmp_path):
     calib = calib_files.IntrinsicCalibration.from_dict(dt.DEFAULT_INTRINSICS, "default")
     path = calib_files.save_intrinsics(calib, tmp_path / "cal", "nobot")
     before = hashlib.sha256(path.read_bytes()).hexdigest()
-    t = time.monotonic()
     with pytest.raises(CommitError) as e:
         commit_intrinsics("nobot", path, master_uri=roscore["ROS_MASTER_URI"], timeout=2)
     msg = str(e.value)
-    assert "no service /nobot/camera_node/set_camera_info" in msg and "camera node" in msg
+    # the 2 s wait for the service ran out (the reason, not the elapsed time, is what is checked)
+    assert "no service /nobot/camera_node/set_camera_info" in msg and "within 2 s" in msg and "camera node" in msg
     assert f"{path} is kept" in msg and "scp" in msg
-    assert time.monotonic() - t < 60
     with pytest.raises(CommitError, match="cannot reach the ROS master"):
         commit_intrinsics("nobot", path, master_uri=f"http://127.0.0.1:{_free_port()}", timeout=2)
     assert hashlib.sha256(path.read_bytes()).hexdigest() == before  # the local file is intact
@@ -269,23 +186,31 @@ def test_ros_missing_is_a_clear_error(monkeypatch, tmp_path):
 
 
 def test_helper_uses_newest_frame_only(roscore, tmp_path):
-    """A consumer far slower than the camera: every frame it gets is at most a frame or two old."""
+    """A consumer that takes one frame, then comes back after the whole recording has played, gets the
+    newest frame received, never the next one of a queue (counts, not a rate: a loaded machine may
+    receive fewer of the bag's frames, and the answer is still the newest of those it received)."""
     env = roscore
     bag = str(datasets.session_dir() / "intrinsics.bag")
     with open_live(f"ros:{ROBOT}", master_uri=env["ROS_MASTER_URI"]) as cam:
         _wait(lambda: _subscribers(env, TOPIC) > 0, 60, "the helper to subscribe")
-        with _started([_ros_tool("rosbag"), "play", "--quiet", bag], env, tmp_path / "play.log"):
-            got, lags = [], []
-            f = cam.latest(timeout=30)
-            assert f is not None
-            for _ in range(8):
-                time.sleep(0.4)  # 12 camera frames go by
-                f = cam.latest(after=f.index, timeout=5)
-                assert f is not None, cam.status
-                lags.append(cam.status.frames - 1 - f.index)
-                got.append(f.index)
-    assert min(np.diff(got)) >= 3, got  # frames were skipped, not queued
-    assert max(lags) <= 3, lags
+        play = subprocess.Popen([_ros_tool("rosbag"), "play", "--quiet", bag], env=env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        try:
+            first = cam.latest(timeout=30)
+            assert first is not None
+            assert play.wait(timeout=600) == 0  # a safety net: the bag plays in about 20 s
+        finally:
+            if play.poll() is None:
+                os.killpg(play.pid, signal.SIGKILL)
+                play.wait()
+        back = cam.latest(after=first.index, timeout=5)  # the consumer is back: the newest frame so far
+        newest = back
+        while (newer := cam.latest(after=newest.index, timeout=2)) is not None:  # frames still in the pipe
+            newest = newer
+        st = cam.status
+    assert st.bad == {} and st.frames > first.index + 10, st  # many frames arrived while the consumer was away
+    assert back is not None and back.index > first.index + 10, (first.index, back)  # skipped, not queued
+    assert newest.index == st.frames - 1, (newest.index, st)  # the last frame handed out is the last received
     assert Path(bag).exists()
 
 
@@ -334,7 +259,7 @@ def test_corrupt_frames_over_ros_are_counted(roscore, tmp_path):
     """JPEGs damaged on the way (cut short) arrive over ROS: counted by reason, never handed out."""
     env = roscore
     # published on /testbot/camera_node/image/compressed
-    bag = test_live_sources._bag(tmp_path / "bad.bag", 10, fps=10, corrupt={2, 5, 6})
+    bag = write_test_bag(tmp_path / "bad.bag", 10, fps=10, corrupt={2, 5, 6})
     with open_live("ros:testbot", master_uri=env["ROS_MASTER_URI"]) as cam:
         _wait(lambda: _subscribers(env, "/testbot/camera_node/image/compressed") > 0, 60, "the helper to subscribe")
         play = _run([_ros_tool("rosbag"), "play", "--quiet", "-d", "0.5", bag], env)

@@ -14,54 +14,10 @@ import pytest
 from dtscal_lib import camera as cam
 from dtscal_lib.selfcheck import FAIL, NOT_IMPLEMENTED, PASS
 from dtscal_lib.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
-
-
-def stub(*args, **kwargs):
-    raise NotImplementedError("write this function")
-
-
-def status(check, fn):
-    return _quiet(check, fn).status
-
-
-def _quiet(check, fn):
-    import contextlib
-    import io
-
-    with contextlib.redirect_stdout(io.StringIO()):
-        return check(fn)
+from selfcheck_refs import _quiet, p2g_no_divide, p2g_transposed, ref_constraints, ref_intrinsics, ref_p2g, status, stub
 
 
 # =========================================================================== nb03 references
-def ref_constraints(H):
-    """v_ij built from the quadratic form h_i^T B h_j, by differentiating with respect to b."""
-    H = np.asarray(H, dtype=float)
-    basis = []
-    for k in range(6):
-        e = np.zeros(6)
-        e[k] = 1.0
-        B = np.array([[e[0], e[1], e[3]], [e[1], e[2], e[4]], [e[3], e[4], e[5]]])
-        basis.append(B)
-    h1, h2 = H[:, 0], H[:, 1]
-    v12 = [h1 @ B @ h2 for B in basis]
-    d = [h1 @ B @ h1 - h2 @ B @ h2 for B in basis]
-    return np.array([v12, d])
-
-
-def ref_intrinsics(Hs):
-    """Closed form via a Cholesky factorisation of B (not Zhang's explicit formulas)."""
-    if len(Hs) < 3:
-        raise ValueError("need at least 3 views")
-    V = np.vstack([ref_constraints(H / np.linalg.norm(H)) for H in Hs])
-    b = np.linalg.svd(V)[2][-1]
-    B = np.array([[b[0], b[1], b[3]], [b[1], b[2], b[4]], [b[3], b[4], b[5]]])
-    if B[0, 0] < 0:
-        B = -B
-    L = np.linalg.cholesky(B)  # B = L L^T = K^-T K^-1  ->  K^-1 = L^T (up to scale)
-    K = np.linalg.inv(L.T)
-    return K / K[2, 2]
-
-
 def ref_extrinsics(K, H):
     """Via OpenCV: decompose with K^-1, orthonormalise with cv2.Rodrigues round trip."""
     A = np.linalg.solve(K, H)
@@ -350,19 +306,6 @@ def ground_rightward(cols, rows, square, x0, y0):
     return np.column_stack([x0 + (k // cols) * square, y0 - (k % cols) * square])
 
 
-def ref_p2g(H, uv):
-    return cv2.perspectiveTransform(np.asarray(uv, float).reshape(-1, 1, 2), np.asarray(H, float)).reshape(-1, 2)
-
-
-def p2g_transposed(H, uv):
-    return ref_p2g(np.asarray(H).T, uv)
-
-
-def p2g_no_divide(H, uv):
-    uv = np.asarray(uv, float)
-    return (np.column_stack([uv, np.ones(len(uv))]) @ np.asarray(H).T)[:, :2]
-
-
 def p2g_divide_by_h33(H, uv):
     H = np.asarray(H, float)
     return p2g_no_divide(H / H[2, 2], uv)
@@ -380,8 +323,41 @@ def test_ground_points_wrong_order_message():
     assert "wrong order" in rep.text()
 
 
+def p2g_float32(H, uv):
+    """Right formula, computed in float32 (an image's dtype carried over): off by ~5e-8 m."""
+    uv = np.asarray(uv, np.float32)
+    p = np.column_stack([uv, np.ones(len(uv), np.float32)]) @ np.asarray(H, np.float32).T
+    return (p[:, :2] / p[:, 2:3]).astype(float)
+
+
+def p2g_rounded_H(H, uv):
+    """Right formula with H rounded to 6 decimals (copied from a printout): off by ~0.3 mm."""
+    return ref_p2g(np.round(np.asarray(H, float), 6), uv)
+
+
+def _case_lines(rep) -> dict[str, bool]:
+    """case title -> passed, from the report's text (``ok   title`` / ``FAIL title: ...``)."""
+    out = {}
+    for line in rep.text().splitlines():
+        word, _, rest = line.strip().partition(" ")
+        if word in ("ok", "FAIL"):
+            out[rest.strip().split(":")[0]] = word == "ok"
+    return out
+
+
+@pytest.mark.parametrize("wrong", [p2g_float32, p2g_rounded_H])
+def test_pixel_to_ground_opencv_cases_are_needed(wrong):
+    """These wrong answers pass the default-homography sanity case (its 2-3 mm tolerance) and fail only
+    because each OpenCV comparison (1e-9 m) is there: removing those cases would let them through."""
+    cases = _case_lines(_quiet(nb05.check_pixel_to_ground, wrong))
+    sanity = [t for t in cases if t.startswith("Duckietown's default homography")]
+    opencv = [t for t in cases if t not in sanity]
+    assert len(sanity) == 1 and cases[sanity[0]], cases  # the sanity case alone would pass it
+    assert len(opencv) == 2 and not any(cases[t] for t in opencv), cases  # each OpenCV case catches it
+
+
 def test_pixel_to_ground_pass_fail_stub():
     assert status(nb05.check_pixel_to_ground, ref_p2g) == PASS
     assert status(nb05.check_pixel_to_ground, stub) == NOT_IMPLEMENTED
-    for wrong in (p2g_transposed, p2g_no_divide, p2g_divide_by_h33):
+    for wrong in (p2g_transposed, p2g_no_divide, p2g_divide_by_h33, p2g_float32, p2g_rounded_H):
         assert status(nb05.check_pixel_to_ground, wrong) == FAIL, wrong.__name__

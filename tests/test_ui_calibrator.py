@@ -85,6 +85,44 @@ def test_calibrate_button_then_commit_to_a_folder(filled, truth, tmp_path):
         np.testing.assert_allclose(a, b, atol=1e-3)
 
 
+def test_calibrate_runs_in_a_helper_process(filled, monkeypatch):
+    """README: CALIBRATE runs in its own process, so the live image never waits for the solver.
+
+    The solve is followed by process id: the in-process solver (patched to record the pid that runs
+    it) must not run, and the solver process that answered is a child of this one, with another pid.
+    """
+    from dtscal_lib import pipeline, session
+    from dtscal_lib.ui import intrinsic, solver
+
+    here = []
+
+    def in_this_process(*a, **k):
+        here.append(os.getpid())
+        return real(*a, **k)
+
+    real = session.calibrate_without_outlier_views
+    for module in (session, pipeline, intrinsic):  # wherever the in-process solver is reachable from
+        monkeypatch.setattr(module, "calibrate_without_outlier_views", in_this_process, raising=False)
+    answered = []
+    real_calibrate = solver.SolverProcess.calibrate
+
+    def calibrate(self, *a, **k):
+        out = real_calibrate(self, *a, **k)
+        answered.append(self._proc.pid)
+        return out
+
+    monkeypatch.setattr(solver.SolverProcess, "calibrate", calibrate)
+    assert filled.prepare_calibration(wait=120)  # the helper is up (a safety net: it starts in ~2 s)
+    before = filled.result
+    filled.calibrate_button.click()
+    assert wait_for(lambda: not filled.calibrating and filled.result is not None and filled.result is not before, 120)
+    assert here == [], "CALIBRATE ran in the kernel's process"
+    assert len(answered) == 1 and answered[0] != os.getpid()
+    with open(f"/proc/{answered[0]}/status") as f:  # the helper is this process's child
+        ppid = next(int(line.split()[1]) for line in f if line.startswith("PPid:"))
+    assert ppid == os.getpid()
+
+
 def test_fast_preview_maps_are_the_kits_maps():
     from dtscal_lib import duckietown as dt
     from dtscal_lib.camera import CameraModel

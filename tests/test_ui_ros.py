@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import test_ros_live
-from test_ros_bag_play import _free_port, _log, _ros_tool, _started, running_roscore
-from test_ros_live import CAMERA_NODE, ROBOT, SYSTEM_PYTHON, _kill_master, _wait
+from ros_env import CAMERA_NODE, ROBOT, SYSTEM_PYTHON, _free_port, _kill_master, _log, _ros_tool, _started, _wait, \
+    running_roscore
 
 from dtscal_lib import calib_files, datasets
 from dtscal_lib.sources import open_live
 from dtscal_lib.ui import LiveCalibrator
 
 pytestmark = pytest.mark.slow
-ros_ok = test_ros_live.ros_ok
 
 
 def test_calibrator_commits_over_ros_and_survives_a_master_crash(ros_ok, tmp_path):

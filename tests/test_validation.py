@@ -24,7 +24,7 @@ from dtscal_lib.calibration import calibrate
 from dtscal_lib.errors import CalibrationError, CalibrationFileError, DtscalError
 from dtscal_lib.validation import check_board, check_image_size, check_output_folder, check_seed
 
-from unprivileged import run_unprivileged, shared_tmp
+from unprivileged import readable_copy, run_unprivileged, shared_tmp
 
 SESSION = datasets.session_dir()
 INTRINSIC_BAG = SESSION / "intrinsics.bag"
@@ -238,8 +238,8 @@ def test_cli_out_read_only_folder_exit_2():
         os.chmod(ro, 0o555)
         ok, code = run_unprivileged(main, ["synth", "--out", str(ro / "data"), "-q"])
         assert ok and code == "2", code
-        ok, code = run_unprivileged(main, ["calibrate-intrinsics", "--source", str(INTRINSIC_BAG), "--out", str(ro),
-                                           "-q"])
+        bag = readable_copy(INTRINSIC_BAG, d)  # the checkout may lie in a folder nobody cannot enter
+        ok, code = run_unprivileged(main, ["calibrate-intrinsics", "--source", str(bag), "--out", str(ro), "-q"])
         assert ok and code == "2", code
         assert list(ro.iterdir()) == []
 

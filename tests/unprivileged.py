@@ -7,6 +7,11 @@ interpreter (which may live in a folder ``nobody`` cannot read, such as ``/root`
 reports back through a pipe. Without root it runs the function in a child as the current
 user. :func:`shared_tmp` makes a folder ``nobody`` can reach (pytest's ``tmp_path`` under
 root lies inside a 0700 folder).
+
+The checkout itself may lie in a folder ``nobody`` cannot enter (a clone in ``/root`` or in a
+``mktemp -d`` folder): so the child imports every module of ``dtscal_lib`` before it drops its
+rights (a lazy import would otherwise fail), and a test hands ``nobody`` copies of its input files
+in the shared folder (:func:`readable_copy`), never paths inside the checkout.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ def run_unprivileged(fn, *args, timeout: int = 60) -> tuple[bool, str]:
             os.close(read_end)
             signal.alarm(timeout)
             if os.geteuid() == 0:
+                _import_everything()
                 user = pwd.getpwnam("nobody")
                 os.setgroups([])
                 os.setgid(user.pw_gid)
@@ -51,6 +57,49 @@ def run_unprivileged(fn, *args, timeout: int = 60) -> tuple[bool, str]:
     os.close(read_end)
     _, status = os.waitpid(pid, 0)
     return os.waitstatus_to_exitcode(status) == 0, b"".join(chunks).decode("utf-8", "replace")
+
+
+#: third-party packages the kit imports lazily (inside functions): their whole package is imported ahead,
+#: because the virtualenv, too, may lie in the unreadable checkout (a fresh clone's .venv)
+LAZY_PACKAGES = ("rosbags", "lz4", "tqdm", "yaml", "matplotlib.colors", "ipywidgets")
+
+
+def _import_everything() -> None:
+    """Import every module of dtscal_lib and of the lazily imported packages now, while they can be read."""
+    import importlib
+    import pkgutil
+
+    import dtscal_lib
+
+    names = [m.name for m in pkgutil.walk_packages(dtscal_lib.__path__, "dtscal_lib.")]
+    for top in LAZY_PACKAGES:
+        try:
+            pkg = importlib.import_module(top)
+        except Exception:  # noqa: BLE001 - not installed: not this test's concern
+            continue
+        if hasattr(pkg, "__path__"):
+            names += [m.name for m in pkgutil.walk_packages(pkg.__path__, top + ".", onerror=lambda _: None)]
+    for name in names:
+        if name.endswith("__main__") or ".tests" in name or ".test_" in name:
+            continue
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - an optional module (ROS, a browser, a backend) is not the test's concern
+            pass
+    try:  # the ROS message types are built on first use
+        from dtscal_lib.sources.bag import _typestore
+
+        _typestore()
+    except Exception:  # noqa: BLE001
+        pass
+
+
+def readable_copy(path, folder: Path) -> Path:
+    """A copy of ``path`` in ``folder`` (from :func:`shared_tmp`) that ``nobody`` can read (mode 0644)."""
+    dst = Path(folder) / Path(path).name
+    shutil.copyfile(path, dst)
+    os.chmod(dst, 0o644)
+    return dst
 
 
 @contextmanager

@@ -1,4 +1,4 @@
-# Corpus of plausible student mistakes for tests/test_grading_corpus.py.
+# Corpus of plausible student mistakes for tests/test_grading.py (also test_selfcheck_diagnosis.py).
 # mistake: float32
 # expect: should return dtype float64
 

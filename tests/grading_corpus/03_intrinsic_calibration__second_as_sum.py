@@ -1,4 +1,4 @@
-# Corpus of plausible student mistakes for tests/test_grading_corpus.py.
+# Corpus of plausible student mistakes for tests/test_grading.py (also test_selfcheck_diagnosis.py).
 # mistake: second_as_sum
 # expect: the second constraint as a sum
 

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: hartley_svd_calls_apply
 # formulation: Hartley sqrt(2) mean distance, SVD; normalizes with its own apply_homography
 import math

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: frobenius_eigh_cholesky
 # formulation: H / Frobenius norm, eigh of V^T V, Cholesky of B
 import math

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: frobenius_svd_closed
 # formulation: H / Frobenius norm (the text's 'divide each H by its norm'), SVD, closed form
 import math

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: h33_eigh_closed
 # formulation: H / H[2, 2], eigh of V^T V, closed form; lambda from the mean
 import math

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: max_abs_svd_cholesky
 # formulation: H / its largest entry, SVD of V^T V, Cholesky
 

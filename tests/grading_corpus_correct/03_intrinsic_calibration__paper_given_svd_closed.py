@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: paper_given_svd_closed
 # formulation: H as given (Zhang's paper), SVD, closed form; lambda = 1 / |K^-1 h1|
 import math

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: rows_normalized
 # formulation: rows of V normalized, SVD, closed form; r1 and r2 normalized separately
 import math

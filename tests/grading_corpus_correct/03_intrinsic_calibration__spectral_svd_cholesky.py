@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: spectral_svd_cholesky
 # formulation: H / spectral norm, SVD, Cholesky of B; lambda from the geometric mean
 import math

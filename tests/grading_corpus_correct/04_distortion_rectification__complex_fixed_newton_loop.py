@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: complex_fixed_newton_loop
 # formulation: complex numbers for r^2, fixed point then Newton, maps row by row
 

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: horner_numeric_indices
 # formulation: Horner's rule, Newton with a numerical Jacobian, maps from np.indices
 

@@ -1,4 +1,4 @@
-# Correct implementation, written differently, for tests/test_grading_correct.py: must get full marks.
+# Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: plain_newton_inv
 # formulation: plain distortion, Newton with the analytic Jacobian (batched solve), inv(new_K) maps
 
