@@ -69,12 +69,13 @@ image edge is rejected (reason ``"at_border"``).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -237,6 +238,26 @@ def find_saddles(gray: np.ndarray, *, scale: float = 0.5, sigma: float = 1.0,
         (turns by 90 degrees between neighbouring checkerboard corners)
     strength : (M,) float64 saddle strength
     """
+    return _saddles(gray, scale, sigma, rel_threshold, min_strength)[:3]
+
+
+#: the sub-pixel saddle (one Newton step to where the blurred intensity's gradient vanishes) is used only
+#: when it lies within this many pixels of the resized image from the peak pixel; farther, the quadratic
+#: model does not hold and the peak pixel is kept
+SADDLE_NEWTON_REACH = 1.0
+
+
+def _saddles(gray: np.ndarray, scale: float = 0.5, sigma: float = 1.0, rel_threshold: float = 0.15,
+             min_strength: float = 20.0):
+    """:func:`find_saddles`, and also each saddle at sub-pixel precision ``(M, 2)``.
+
+    A checkerboard corner is a saddle of the blurred intensity: its gradient vanishes there (the pattern is
+    point-symmetric about the corner). One Newton step from the peak pixel, ``-H^-1 grad f`` with the same
+    Sobel filters, puts it there. Measured on the 26 real photographs (``data/real``, the 1300 corners the
+    kit finds): 0.08 px median, 0.19 px 90th percentile, 0.43 px at most from the refined corners, against
+    0.78 / 1.12 / 1.50 px for the peak pixel; started there, ``cornerSubPix`` needs one iteration fewer
+    (the refinement's first pass). The clusters and the lattice use the peak pixels (``points``).
+    """
     small = gray if scale == 1 else cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     f = cv2.GaussianBlur(small.astype(np.float32), (0, 0), sigma)
     fxx = cv2.Sobel(f, cv2.CV_32F, 2, 0, ksize=3)
@@ -245,12 +266,28 @@ def find_saddles(gray: np.ndarray, *, scale: float = 0.5, sigma: float = 1.0,
     s = fxy * fxy - fxx * fyy
     peak = cv2.dilate(s, np.ones((5, 5), np.uint8))
     thr = max(rel_threshold * float(s.max()), float(min_strength))
-    ys, xs = np.nonzero((s >= peak) & (s > thr))
+    # local maxima above the threshold (the threshold first: few pixels pass it)
+    above = np.flatnonzero(s.ravel() > thr)
+    ys, xs = np.divmod(above[s.ravel()[above] >= peak.ravel()[above]], s.shape[1])
     a, b, c = fxx[ys, xs], fxy[ys, xs], fyy[ys, xs]
     angle = 0.5 * np.arctan2(2.0 * b, a - c).astype(np.float64)
     # pixel centres: small pixel k covers full-size pixels [k/scale, (k+1)/scale)
     pts = (np.column_stack([xs, ys]).astype(np.float64) + 0.5) / scale - 0.5
-    return pts, angle, s[ys, xs].astype(np.float64)
+    # the Newton step: 3x3 Sobel first derivatives (8 f_x) at the peaks, with the Sobel second ones (4 f_xx)
+    # (the image's edge pixel repeated beyond it)
+    hs, ws = f.shape
+    x0, x1 = np.maximum(xs - 1, 0), np.minimum(xs + 1, ws - 1)
+    y0, y1 = np.maximum(ys - 1, 0), np.minimum(ys + 1, hs - 1)
+    gx = (f[y0, x1] - f[y0, x0]) + 2 * (f[ys, x1] - f[ys, x0]) + (f[y1, x1] - f[y1, x0])
+    gy = (f[y1, x0] - f[y0, x0]) + 2 * (f[y1, xs] - f[y0, xs]) + (f[y1, x1] - f[y0, x1])
+    gx, gy = gx.astype(np.float64) / 8.0, gy.astype(np.float64) / 8.0
+    a, b, c = a.astype(np.float64) / 4.0, b.astype(np.float64) / 4.0, c.astype(np.float64) / 4.0
+    det = a * c - b * b  # < 0 at a saddle
+    with np.errstate(divide="ignore", invalid="ignore"):
+        step = -np.column_stack([c * gx - b * gy, a * gy - b * gx]) / det[:, None]
+    keep = np.all(np.abs(step) <= SADDLE_NEWTON_REACH, axis=1)  # also False for NaN
+    fine = pts + np.where(keep[:, None], step, 0.0) / scale
+    return pts, angle, s[ys, xs].astype(np.float64), fine
 
 
 # --------------------------------------------------------------------------- step 2: clusters
@@ -285,13 +322,15 @@ class _Candidate:
     strength: np.ndarray | None = None
     #: every saddle of the frame (points, strengths, their KD-tree): the lattice's ring test looks at all of them
     frame_saddles: tuple | None = None
+    #: the saddles at sub-pixel precision (:func:`_saddles`), the lattice's corners (``saddles`` if None)
+    fine: np.ndarray | None = None
 
 
 def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
                 min_fraction: float = 0.8) -> list[_Candidate]:
     """:func:`board_regions` with each box's saddle cluster (see there)."""
     h, w = gray.shape[:2]
-    pts, ang, strength = find_saddles(gray)
+    pts, ang, strength, fine = _saddles(gray)
     n = len(pts)
     need = max(4, int(math.ceil(min_fraction * board.n_corners)))
     if n < need:
@@ -307,12 +346,13 @@ def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
     turn = np.abs(((ang[idx] - ang[:, None]) % np.pi) - np.pi / 2) < 0.4
     close = dist < 2.0 * np.maximum(dist[:, 1:2], 1e-9)
     similar = np.abs(np.log(strength[idx] / strength[:, None])) < math.log(6.0)
-    ok = (turn & close & similar).ravel()
-    rows = np.repeat(np.arange(n), idx.shape[1])[ok]
-    cols = idx.ravel()[ok]
-    adj = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)).tocsr()
-    adj = adj.multiply(adj.T)  # mutual links only
-    _, label = connected_components(adj, directed=False)
+    ok = turn & close & similar
+    # mutual links only: i links to j and j to i
+    back = ((idx[idx] == np.arange(n)[:, None, None]) & ok[idx]).any(axis=2)
+    mutual = ok & back
+    adj = csr_matrix((np.ones(int(mutual.sum())), idx[mutual], np.concatenate([[0], np.cumsum(mutual.sum(1))])),
+                     shape=(n, n))
+    _, label = connected_components(adj, directed=True, connection="weak")  # the links are symmetric
     sizes = np.bincount(label)
     regions: list[_Candidate] = []
     for seed in np.argsort(-sizes)[:max_regions]:
@@ -324,19 +364,24 @@ def _candidates(gray: np.ndarray, board: Board, *, max_regions: int = 2,
         # white margin and for corners the saddle test missed
         pad = 1.5 * spacing + 4.0
         regions.append(_Candidate(_box_around(pts[members], pad, w, h), pts[members], spacing,
-                                  strength[members], frame))
+                                  strength[members], frame, fine[members]))
         # a strongly foreshortened board (e.g. lying on the floor) can split into pieces where
         # its row and column spacings differ more than the link rule allows: first try the
         # box that also holds the pieces of at least 4 saddles within MERGE_REACH spacings
-        near, _ = cKDTree(pts[members]).query(pts, distance_upper_bound=MERGE_REACH * spacing)
-        group = np.unique(label[np.isfinite(near)])
-        group = group[(sizes[group] >= 4) & (group != seed)]
+        other = np.flatnonzero((sizes[label] >= 4) & (label != seed))
+        if len(other) * sizes[seed] <= 20000:  # few: all distances (as cKDTree's bound, strictly closer)
+            d2 = ((pts[other, None, :] - pts[None, members, :]) ** 2).sum(-1)
+            other = other[np.sqrt(d2.min(axis=1, initial=np.inf)) < MERGE_REACH * spacing]
+        else:
+            near, _ = cKDTree(pts[members]).query(pts[other], distance_upper_bound=MERGE_REACH * spacing)
+            other = other[np.isfinite(near)]
+        group = np.unique(label[other])
         if len(group):
-            inside = pts[np.isin(label, np.append(group, seed))]
-            merged = _box_around(inside, pad, w, h)
+            together = np.isin(label, np.append(group, seed))
+            merged = _box_around(pts[together], pad, w, h)
             if merged != regions[-1].box:
-                regions.insert(len(regions) - 1, _Candidate(merged, inside, spacing,
-                                                            strength[np.isin(label, np.append(group, seed))], frame))
+                regions.insert(len(regions) - 1, _Candidate(merged, pts[together], spacing, strength[together],
+                                                            frame, fine[together]))
     return regions
 
 
@@ -372,9 +417,10 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     weakest saddle is strongest; the saddles one step outside it must be clearly weaker (the printed board's
     edge, where a single square's corner meets the white margin, gives weaker saddles one step out; equally
     strong ones mean a window of a bigger grid: None; see :data:`LATTICE_RING_RATIO`).
-    Corners come out in a row-major order of the board at the saddle finder's precision (about a pixel);
-    :func:`_finish` orders, refines and checks them as it does the classic detector's, and where its checks
-    fail the classic detector still runs.
+    Corners come out in a row-major order of the board at the sub-pixel saddles' precision (``cand.fine``,
+    about 0.1-0.2 px: :func:`_saddles`; the walk itself uses the peak pixels); :func:`_finish` orders,
+    refines and checks them as it does the classic detector's, and where its checks fail the classic
+    detector still runs.
 
     Measured: the lattice gives the board in 24 of 26 views of ``data/real`` and 339 of the 353 detections of
     the recorded session, saving the classic detector's 3-10 ms per view; the refined corners agree with
@@ -388,14 +434,17 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
         return None
     k = min(7, n)
     _, nbr = cKDTree(pts).query(pts, k=k)
-    xs, ys = pts[:, 0].tolist(), pts[:, 1].tolist()
-    nbr = nbr[:, 1:].tolist()
+    nbr = nbr[:, 1:]
+    # each saddle's neighbours as (dx, dy, index) from it, for the walk below (plain Python: a few hundred
+    # small steps, where numpy's per-call cost would dominate)
+    rel = [list(zip(*r)) for r in zip((pts[nbr, 0] - pts[:, 0, None]).tolist(),
+                                      (pts[nbr, 1] - pts[:, 1, None]).tolist(), nbr.tolist())]
     # seed: the saddle nearest the centre of the strong half (a board corner, not an edge saddle)
     strength = cand.strength if cand.strength is not None else np.ones(n)
     strong = strength >= np.median(strength)
     centre = pts[strong].mean(axis=0)
     seed = int(np.argmin(np.linalg.norm(pts - centre, axis=1)))
-    vec = pts[nbr[seed]] - pts[seed]
+    vec = pts[nbr[seed]] - pts[seed]  # nearest first
     length = np.linalg.norm(vec, axis=1)
     u = vec[0]
     cos = np.abs(vec[1:] @ u) / np.maximum(length[1:] * length[0], 1e-12)
@@ -407,20 +456,20 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     local = {seed: (float(u[0]), float(u[1]), float(v[0]), float(v[1]))}
     queue = [seed]
     head = 0
+    reach2 = LATTICE_REACH * LATTICE_REACH
     while head < len(queue):
         p = queue[head]
         head += 1
         i, j = index[p]
         ux, uy, vx, vy = local[p]
-        px, py = xs[p], ys[p]
+        near = rel[p]
         for di, dj, sx, sy in ((1, 0, ux, uy), (-1, 0, -ux, -uy), (0, 1, vx, vy), (0, -1, -vx, -vy)):
-            qx, qy = px + sx, py + sy
-            reach2 = LATTICE_REACH * LATTICE_REACH * (sx * sx + sy * sy)
-            best, best_d = -1, reach2
-            for q in nbr[p]:
-                d = (xs[q] - qx) ** 2 + (ys[q] - qy) ** 2
+            best, best_d = -1, reach2 * (sx * sx + sy * sy)
+            for rx, ry, q in near:
+                dx, dy = rx - sx, ry - sy
+                d = dx * dx + dy * dy
                 if d < best_d:
-                    best, best_d = q, d
+                    best, best_d, ax, ay = q, d, rx, ry
             if best < 0:
                 continue
             key = (i + di, j + dj)
@@ -432,7 +481,6 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
                 return None
             index[best] = key
             at[key] = best
-            ax, ay = xs[best] - px, ys[best] - py
             local[best] = (ax * di, ay * di, vx, vy) if di else (ux, uy, ax * dj, ay * dj)
             queue.append(best)
     if len(at) < board.n_corners:
@@ -478,7 +526,8 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     if max(float(side.mean()) for side in sides) >= LATTICE_RING_SIDE:
         return None
     grid = win.T if ni == board.cols else win  # rows x cols, a row-major order of the board
-    return pts[grid.reshape(-1)]
+    fine = pts if cand.fine is None else np.asarray(cand.fine, dtype=np.float64)
+    return fine[grid.reshape(-1)]
 
 
 def _box_around(p: np.ndarray, pad: float, w: int, h: int) -> tuple[int, int, int, int]:
@@ -585,6 +634,13 @@ MIN_ISOTROPY = 0.4
 MIN_WINDOW = 4
 #: stopping rule of the kit's refinement: 30 iterations or a step below 0.01 px (ROS: 30, 0.1 px)
 REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
+#: stopping rule of the first pass (ROS's 0.1 px): its corners are checked against tolerances of a pixel
+#: and then polished (:func:`polish_corners`, which converges again) or, where the polish is not used,
+#: finished with :data:`REFINE_CRITERIA`. ``cornerSubPix`` contracts a start error by about 20x per
+#: iteration (measured on ``data/real``: steps of 0.74, 0.04, 0.003 px median from the saddle pixels), so a
+#: step below 0.1 px leaves about 0.005 px; from the sub-pixel saddles (:func:`_saddles`) most corners stop
+#: after one or two iterations instead of two or three (first pass 1.40 -> 0.96 ms median on ``data/real``)
+FIRST_PASS_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.1)
 #: the kit's last refinement step works on the image smoothed by a Gaussian of this sigma, pixels
 #: (see :func:`polish_corners`)
 REFINE_SIGMA = 1.0
@@ -671,21 +727,20 @@ def corner_windows(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
 
     along = unit(right, -left)   # direction of the rows at each corner
     across = unit(down, -up)     # direction of the columns
-    room = np.full(right.shape[:2], np.inf)
-    # a side reached by stepping along `step` has its far edge parallel to `edge_dir`
-    for step, opposite, edge_dir in ((right, left, across), (left, right, across),
-                                     (down, up, along), (up, down, along)):
-        normal = np.stack([-edge_dir[..., 1], edge_dir[..., 0]], axis=-1)
-        support = np.abs(normal).sum(axis=-1)
-        dist = np.abs((step * normal).sum(axis=-1))
-        outer = np.isnan(dist)
-        dist_opp = np.abs((opposite * normal).sum(axis=-1))
-        reach = np.where(outer, outer_fraction * dist_opp, INNER_REACH * dist)
-        room = np.minimum(room, (reach - margin) / support)
+    # the four sides at once: a side reached by stepping along `step` has its far edge parallel to `edge_dir`
+    step = np.stack([right, left, down, up])
+    opposite = np.stack([left, right, up, down])
+    edge_dir = np.stack([across, across, along, along])
+    normal = np.stack([-edge_dir[..., 1], edge_dir[..., 0]], axis=-1)
+    support = np.abs(normal).sum(axis=-1)
+    dist = np.abs((step * normal).sum(axis=-1))
+    dist_opp = np.abs((opposite * normal).sum(axis=-1))
+    reach = np.where(np.isnan(dist), outer_fraction * dist_opp, INNER_REACH * dist)
+    room = ((reach - margin) / support).min(axis=0)
     return np.maximum(MIN_WINDOW, np.floor(room)).astype(int).ravel()
 
 
-def _subpix(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> np.ndarray:
+def _subpix(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray, criteria=REFINE_CRITERIA) -> np.ndarray:
     """``cornerSubPix`` of each point with its own window half-size (grouped by size)."""
     out = np.asarray(pts, dtype=np.float64).reshape(-1, 2).copy()
     h, w = gray.shape[:2]
@@ -693,7 +748,7 @@ def _subpix(gray: np.ndarray, pts: np.ndarray, radius: np.ndarray) -> np.ndarray
     for r in np.unique(radius):
         sel = radius == r
         p = out[sel].astype(np.float32).reshape(-1, 1, 2).copy()
-        cv2.cornerSubPix(gray, p, (int(r), int(r)), (-1, -1), REFINE_CRITERIA)
+        cv2.cornerSubPix(gray, p, (int(r), int(r)), (-1, -1), criteria)
         out[sel] = p.reshape(-1, 2)
     return out
 
@@ -734,12 +789,36 @@ def _grid_prediction(corners: np.ndarray, board: Board, exclude: np.ndarray | No
     return pred, err
 
 
-def _local_homography(c: np.ndarray, board: Board, reach: int, exclude: np.ndarray | None):
-    """Per-corner DLT from index offsets within ``reach`` to pixels; (pred, err, n_neighbours)."""
+def _local_homography(c: np.ndarray, board: Board, reach: int, exclude: np.ndarray | None,
+                      only: np.ndarray | None = None):
+    """Per-corner DLT from index offsets within ``reach`` to pixels; (pred, err, n_neighbours).
+
+    ``only`` (bool (N,)): predict these corners only (the others get NaN and 0 neighbours)."""
     R, C = board.rows, board.cols
-    j, i = np.divmod(np.arange(R * C), C)
+    if only is not None:
+        sel = np.flatnonzero(only)
+        pred, err, n = np.full_like(c, np.nan), np.full(len(c), np.nan), np.zeros(len(c), dtype=int)
+        if len(sel):
+            pred[sel], err[sel], n[sel] = _local_homography_at(c, board, reach, exclude, sel)
+        return pred, err, n
+    return _local_homography_at(c, board, reach, exclude, np.arange(R * C))
+
+
+@functools.lru_cache(maxsize=4)
+def _offsets(reach: int):
+    """Index offsets ``(dj, di)`` within ``reach`` (the centre left out), and the products ``P P^T`` of
+    ``P = (di, dj, 1)`` for each, flattened ``(K, 9)``: the blocks of a DLT's normal matrix."""
     offs = np.array([(dj, di) for dj in range(-reach, reach + 1) for di in range(-reach, reach + 1)
                      if (dj, di) != (0, 0)])
+    P = np.column_stack([offs[:, 1], offs[:, 0], np.ones(len(offs))]).astype(np.float64)
+    return offs, (P[:, :, None] * P[:, None, :]).reshape(-1, 9)
+
+
+def _local_homography_at(c: np.ndarray, board: Board, reach: int, exclude: np.ndarray | None, targets: np.ndarray):
+    """:func:`_local_homography` for the corners ``targets`` (indices): (pred, err, n), each for those only."""
+    R, C = board.rows, board.cols
+    j, i = np.divmod(targets, C)
+    offs, PP = _offsets(reach)
     nj, ni = j[:, None] + offs[:, 0], i[:, None] + offs[:, 1]
     valid = (nj >= 0) & (nj < R) & (ni >= 0) & (ni < C)
     nb = np.where(valid, nj * C + ni, 0)
@@ -748,29 +827,33 @@ def _local_homography(c: np.ndarray, board: Board, reach: int, exclude: np.ndarr
     n = valid.sum(1)
     # pixel coordinates relative to the neighbours' mean, scaled to about 1 (conditioning)
     p = c[nb]
-    m = valid[..., None].astype(np.float64)
-    centre = (p * m).sum(1) / np.maximum(n, 1)[:, None]
-    scale = np.sqrt((((p - centre[:, None]) ** 2).sum(-1) * valid).sum(1) / np.maximum(n, 1))
-    scale = np.maximum(scale, 1e-9)
-    q = (p - centre[:, None]) / scale[:, None, None]
-    x = np.broadcast_to(offs[None, :, 1].astype(np.float64), q.shape[:2])
-    y = np.broadcast_to(offs[None, :, 0].astype(np.float64), q.shape[:2])
-    one, zero = np.ones_like(x), np.zeros_like(x)
+    wt = valid.astype(np.float64)
+    centre = np.einsum("tk,tkd->td", wt, p) / np.maximum(n, 1)[:, None]
+    q = p - centre[:, None]
+    scale = np.maximum(np.sqrt(np.einsum("tk,tkd,tkd->t", wt, q, q) / np.maximum(n, 1)), 1e-9)
+    q /= scale[:, None, None]
     u, v = q[..., 0], q[..., 1]
-    r1 = np.stack([x, y, one, zero, zero, zero, -u * x, -u * y, -u], axis=-1)
-    r2 = np.stack([zero, zero, zero, x, y, one, -v * x, -v * y, -v], axis=-1)
-    A = np.concatenate([r1, r2], axis=1) * np.concatenate([valid, valid], axis=1)[..., None]
+    # the DLT's normal matrix A^T A, with the rows (x, y, 1, 0, 0, 0, -u x, -u y, -u) and
+    # (0, 0, 0, x, y, 1, -v x, -v y, -v) of each valid neighbour, in 3x3 blocks of sums of P P^T
+    # (P = (x, y, 1)) weighted by 1, -u, -v and u^2 + v^2
+    s1, su, sv, suv = (w @ PP for w in (wt, wt * u, wt * v, wt * (u * u + v * v)))
+    M = np.zeros((len(targets), 9, 9))
+    M[:, 0:3, 0:3] = M[:, 3:6, 3:6] = s1.reshape(-1, 3, 3)
+    M[:, 0:3, 6:9] = -su.reshape(-1, 3, 3)
+    M[:, 3:6, 6:9] = -sv.reshape(-1, 3, 3)
+    M[:, 6:9, 0:3] = M[:, 0:3, 6:9].transpose(0, 2, 1)
+    M[:, 6:9, 3:6] = M[:, 3:6, 6:9].transpose(0, 2, 1)
+    M[:, 6:9, 6:9] = suv.reshape(-1, 3, 3)
     # least squares with the homography's last element fixed to 1 (the neighbours' centre maps to a
     # finite point): an 8x8 solve per corner, ten times faster than the null vector by eigh; a tiny
     # ridge keeps corners with too few neighbours (n < 4, no prediction) from making it singular
-    M = A.transpose(0, 2, 1) @ A
     ridge = 1e-12 * (np.trace(M, axis1=1, axis2=2)[:, None, None] + 1.0) * np.eye(8)
     h = np.linalg.solve(M[:, :8, :8] + ridge, -M[:, :8, 8:9])[..., 0]
     # evaluate at the corner's own index, offset (0, 0)
     ok = n >= 4
-    pred = np.full_like(c, np.nan)
+    pred = np.full((len(targets), 2), np.nan)
     pred[ok] = h[ok][:, [2, 5]] * scale[ok, None] + centre[ok]
-    return pred, np.linalg.norm(pred - c, axis=1), n
+    return pred, np.linalg.norm(pred - c[targets], axis=1), n
 
 
 def _local_square(corners: np.ndarray, board: Board) -> np.ndarray:
@@ -816,6 +899,12 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     4. :func:`polish_corners`: once more on the smoothed image (corners refined with a grown
        window for motion blur are left as they are).
 
+    The passes of step 1 stop at ROS's 0.1 px step (:data:`FIRST_PASS_CRITERIA`): their corners only
+    meet tolerances of a pixel before the polish converges again to :data:`REFINE_CRITERIA`; a corner
+    whose first-pass position is the answer (not polished) is converged to :data:`REFINE_CRITERIA`
+    at the end. On ``data/real`` and the stress set the corners are as accurate as with 0.01 px
+    throughout (stress set, seeds 0-9: median error 0.0203 px vs 0.0204, worst 0.125 px both).
+
     Returns
     -------
     (corners (N, 2) float64, ok: bool)
@@ -825,19 +914,21 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
     grown = np.zeros(len(raw), dtype=bool)
     half = np.maximum(MIN_WINDOW, radius // 2)
     square = _local_square(raw, board)
-    c = _subpix(gray, raw, radius)
+    c = _subpix(gray, raw, radius, FIRST_PASS_CRITERIA)
+    coarse = np.ones(len(raw), dtype=bool)  # still as the first pass left it (FIRST_PASS_CRITERIA)
     # the outer ring's windows are small and cannot pull in a start a few pixels off: where one
     # ended far from where the refined inner corners put it, start it again from there and keep
     # the answer that fits a corner better (corner_misfit)
     outer = _outer_ring(board)
     if outer.any() and (~outer).sum() >= 4:
-        pred, _, n = _local_homography(c, board, 2, outer)
+        pred, _, n = _local_homography(c, board, 2, outer, only=outer)
         use = outer & (n >= 4) & np.all(np.isfinite(pred), axis=1)
         use[use] = np.linalg.norm(c[use] - pred[use], axis=1) > np.maximum(1.0, 0.25 * radius[use])
         if use.any():
-            alt = _subpix(gray, pred[use], radius[use])
+            alt = _subpix(gray, pred[use], radius[use], FIRST_PASS_CRITERIA)
             idx = np.flatnonzero(use)
-            better = corner_misfit(gray, alt, radius[idx]) < corner_misfit(gray, c[idx], radius[idx])
+            misfit = corner_misfit(gray, np.concatenate([alt, c[idx]]), np.concatenate([radius[idx], radius[idx]]))
+            better = misfit[:len(idx)] < misfit[len(idx):]
             idx = idx[better]
             c[idx] = alt[better]
             raw = raw.copy()
@@ -852,26 +943,33 @@ def refine_corners_checked(gray: np.ndarray, corners: np.ndarray, board: Board =
             grow = big_r > radius[sel]
             sel, big_r = sel[grow], big_r[grow]
             if len(sel):
-                c[sel] = _subpix(gray, raw[sel], big_r)
+                c[sel] = _subpix(gray, raw[sel], big_r, FIRST_PASS_CRITERIA)
                 radius = radius.copy()
                 radius[sel] = big_r
                 grown[sel] = True
     wandered = np.linalg.norm(c - raw, axis=1) > np.maximum(radius, 0.5 * square)
     c[wandered] = raw[wandered]
+    coarse &= ~wandered
     tol = grid_tolerance(raw, board)
     bad = _inner_disagreement(c, board) > tol
     if bad.any():
         # predict the disagreeing corners from the others (their own positions are not trusted)
-        pred = _local_homography(c, board, 1, bad)[0][bad]
+        pred = _local_homography(c, board, 1, bad, only=bad)[0][bad]
         quad = (c + _grid_jumps(c, board)[0])[bad]  # the outer ring's corners have too few neighbours there
         start = np.where(np.isfinite(pred), pred, quad)
         c[bad] = _subpix(gray, start, half[bad])
+        coarse &= ~bad
         if np.any(_inner_disagreement(c, board) > tol):
             return c, False
     guarded = _guard_refinement(gray, raw, c, board, radius)
     if guarded is None:
         return c, False
-    return polish_corners(gray, guarded, board, skip=grown), True
+    coarse &= np.all(guarded == c, axis=1)
+    out, polished = _polish(gray, guarded, board, grown, None)
+    finish = np.flatnonzero(coarse & ~polished)  # the first pass's answer stays: converge it fully
+    if len(finish):
+        out[finish] = _subpix(gray, out[finish], radius[finish])
+    return out, True
 
 
 def polish_corners(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIETOWN_BOARD, *,
@@ -902,34 +1000,74 @@ def polish_corners(gray: np.ndarray, corners: np.ndarray, board: Board = DUCKIET
     -------
     (N, 2) float64 pixels
     """
+    return _polish(gray, corners, board, skip, sigma)[0]
+
+
+def _polish(gray: np.ndarray, corners: np.ndarray, board: Board, skip, sigma):
+    """:func:`polish_corners`: (corners, (N,) bool: polished)."""
     sigma = REFINE_SIGMA if sigma is None else float(sigma)
     c = np.asarray(corners, dtype=np.float64).reshape(-1, 2).copy()
     if sigma <= 0:
-        return c
-    g = c.reshape(board.rows, board.cols, 2)
-    spacing = max(float(np.linalg.norm(np.diff(g, axis=1), axis=2).max(initial=0.0)),
-                  float(np.linalg.norm(np.diff(g, axis=0), axis=2).max(initial=0.0)))
-    img = refine_image(gray, c, spacing + 2.0, sigma)  # windows are smaller than a square
+        return c, np.zeros(len(c), dtype=bool)
     radius = corner_windows(c, board, margin=WINDOW_MARGIN_PX + sigma)
+    # cornerSubPix reads 1 px beyond its window, bilinearly: the smoothing must be exact that far
+    img = refine_image(gray, c, float(radius.max(initial=0)) + 3.0, sigma)
     p = _subpix(img, c, radius)
     use = np.linalg.norm(p - c, axis=1) < POLISH_MAX_MOVE_PX
     if skip is not None:
         use &= ~np.asarray(skip, dtype=bool)
     c[use] = p[use]
-    return c
+    return c, use
+
+
+def _patches(img: np.ndarray, pts: np.ndarray, n: int) -> np.ndarray:
+    """``(M, n, n)`` float32: ``cv2.getRectSubPix(img, (n, n), pt)`` of every point at once (``img`` float32).
+
+    The same bilinear sampling (pixel ``(i, j)`` of a patch is the image at ``pt + (j, i) - (n - 1) / 2``),
+    gathered for all points in one numpy step instead of one OpenCV call per point (measured on the real
+    photographs: 26 outer corners in about 0.1 ms instead of 0.5 ms). Points whose patch reaches past the
+    image edge are sampled by ``getRectSubPix`` (it replicates the edge).
+    """
+    h, w = img.shape
+    p = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+    origin = p - 0.5 * (n - 1)
+    base = np.floor(origin).astype(np.intp)
+    frac = origin - base
+    inside = np.all((base >= 0) & (base + n < (w, h)), axis=1)
+    out = np.empty((len(p), n, n), dtype=np.float32)
+    if inside.any():
+        blocks = np.lib.stride_tricks.sliding_window_view(img, (n + 1, n + 1))[base[inside, 1], base[inside, 0]]
+        ax, ay = frac[inside, 0, None, None].astype(np.float32), frac[inside, 1, None, None].astype(np.float32)
+        rows = blocks[:, :, :-1] + ax * (blocks[:, :, 1:] - blocks[:, :, :-1])  # along x, then along y
+        out[inside] = rows[:, :-1] + ay * (rows[:, 1:] - rows[:, :-1])
+    for k in np.flatnonzero(~inside):
+        out[k] = cv2.getRectSubPix(img, (n, n), (float(p[k, 0]), float(p[k, 1])))
+    return out
 
 
 def _window_gradients(gray: np.ndarray, pts: np.ndarray, radius):
-    """Per group of equal window half-size: ``(indices, n, gx, gy)``, the image gradients of an
-    ``n x n`` patch (``n = 2 radius + 3``) around each of those points, sub-pixel centred."""
+    """The image gradients around each point, for windows of half-size ``radius``, all points at once.
+
+    Returns ``(gx, gy, d, inside)``: ``gx, gy`` ``(M, m, m)`` central differences of the sub-pixel centred
+    patches (:func:`_patches`) on the ``m x m`` grid (``m = 2 max(radius) + 1``) of offsets ``d`` (pixels,
+    ``(m,)``) from the point, and ``inside`` ``(M, m, m)`` bool, each point's own ``(2 radius + 1)``-square window.
+    """
     radius = np.asarray(radius, dtype=int).reshape(-1)
-    img = gray if gray.dtype == np.float32 else gray.astype(np.float32)
-    for r in np.unique(radius):
-        sel = np.flatnonzero(radius == r)
-        n = 2 * int(r) + 3
-        patch = np.stack([cv2.getRectSubPix(img, (n, n), (float(x), float(y))) for x, y in pts[sel]])
-        gy, gx = np.gradient(patch.astype(np.float64), axis=(1, 2))
-        yield sel, n, gx, gy
+    big = int(radius.max(initial=0))
+    pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+    if gray.dtype == np.float32:
+        patch = _patches(gray, pts, 2 * big + 3)
+    else:  # float32 of the part of the image the patches cover (the image's edge stays the edge)
+        h, w = gray.shape
+        x0, y0 = np.clip(np.floor(pts.min(axis=0)).astype(int) - big - 3, 0, [w, h])
+        x1, y1 = np.clip(np.ceil(pts.max(axis=0)).astype(int) + big + 4, 0, [w, h])
+        crop = gray[y0:y1, x0:x1].astype(np.float32)
+        patch = _patches(crop, pts - (x0, y0), 2 * big + 3)
+    gx = 0.5 * (patch[:, 1:-1, 2:] - patch[:, 1:-1, :-2])
+    gy = 0.5 * (patch[:, 2:, 1:-1] - patch[:, :-2, 1:-1])
+    d = np.arange(-big, big + 1, dtype=np.float64)
+    near = np.abs(d)[None, :] <= radius[:, None]  # (M, m)
+    return gx, gy, d, near[:, :, None] & near[:, None, :]
 
 
 def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
@@ -951,17 +1089,15 @@ def corner_misfit(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
     (M,) float64
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    out = np.ones(len(pts))
-    for sel, n, gx, gy in _window_gradients(gray, pts, radius):
-        d = np.arange(n) - (n - 1) / 2.0
-        px, py = np.meshgrid(d, d)
-        keep = (np.hypot(px, py) >= 1.0)[1:-1, 1:-1]
-        gx, gy = gx[:, 1:-1, 1:-1][:, keep], gy[:, 1:-1, 1:-1][:, keep]
-        px, py = px[1:-1, 1:-1][keep], py[1:-1, 1:-1][keep]
-        num = np.sum((gx * px + gy * py) ** 2, axis=1)
-        den = np.sum((gx * gx + gy * gy) * (px * px + py * py), axis=1)
-        out[sel] = np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
-    return out
+    if len(pts) == 0:
+        return np.ones(0)
+    gx, gy, d, inside = _window_gradients(gray, pts, radius)
+    px, py = np.meshgrid(d, d)
+    inside &= (np.hypot(px, py) >= 1.0)
+    gx, gy = gx * inside, gy * inside
+    num = np.sum((gx * px + gy * py) ** 2, axis=(1, 2))
+    den = np.sum((gx * gx + gy * gy) * (px * px + py * py), axis=(1, 2))
+    return np.where(den > 0, num / np.maximum(den, 1e-300), 1.0)
 
 
 def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> np.ndarray:
@@ -972,14 +1108,14 @@ def corner_isotropy(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) ->
     Takes and returns arrays as :func:`corner_misfit` does: (M,) float64 for M points.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    out = np.zeros(len(pts))
-    for sel, _, gx, gy in _window_gradients(gray, pts, radius):
-        gx, gy = gx[:, 1:-1, 1:-1], gy[:, 1:-1, 1:-1]
-        a, b, d = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
-        half_tr, det = 0.5 * (a + d), a * d - b * b
-        root = np.sqrt(np.maximum(half_tr ** 2 - det, 0.0))
-        out[sel] = np.where(half_tr > 0, (half_tr - root) / np.maximum(half_tr + root, 1e-300), 0.0)
-    return out
+    if len(pts) == 0:
+        return np.zeros(0)
+    gx, gy, _, inside = _window_gradients(gray, pts, radius)
+    gx, gy = gx * inside, gy * inside
+    a, b, d = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
+    half_tr, det = 0.5 * (a + d), a * d - b * b
+    root = np.sqrt(np.maximum(half_tr ** 2 - det, 0.0))
+    return np.where(half_tr > 0, (half_tr - root) / np.maximum(half_tr + root, 1e-300), 0.0)
 
 
 def _outer_ring(board: Board) -> np.ndarray:
@@ -1019,24 +1155,27 @@ _CENTRE_GAIN = _JUMP_WEIGHTS[(1, 1)][1]
 
 def _grid_jumps(corners: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray]:
     """``(jump vectors (N, 2), noise gain (N,))`` of :func:`grid_jump`; zeros for boards under 3x3."""
-    R, C = board.rows, board.cols
-    g = np.asarray(corners, dtype=np.float64).reshape(R, C, 2)
-    vec, gain = np.zeros((R, C, 2)), np.full((R, C), _CENTRE_GAIN)
+    W, gain = _grid_jump_matrix(board.rows, board.cols)
+    return W @ np.asarray(corners, dtype=np.float64).reshape(-1, 2), gain.copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _grid_jump_matrix(R: int, C: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(W (N, N), gain (N,))``: the jump vectors of :func:`_grid_jumps` are ``W @ corners`` (one product
+    instead of a Python loop over the outer ring: the same weights, summed in another order)."""
+    N = R * C
+    W, gain = np.zeros((N, N)), np.full(N, _CENTRE_GAIN)
     if R < 3 or C < 3:
-        return vec.reshape(-1, 2), gain.ravel()
-    # inner corners: the centre of their own 3x3 block, all at once
-    w = _JUMP_WEIGHTS[(1, 1)][0].reshape(3, 3)
-    for dr in range(3):
-        for dc in range(3):
-            vec[1:-1, 1:-1] += w[dr, dc] * g[dr:R - 2 + dr, dc:C - 2 + dc]
-    # the outer ring: from the 3x3 block reaching inward
+        return W, gain
     for j in range(R):
-        for i in (range(C) if j in (0, R - 1) else (0, C - 1)):
+        for i in range(C):
+            # an inner corner: the centre of its own 3x3 block; the outer ring: the block reaching inward
             j0, i0 = min(max(j - 1, 0), R - 3), min(max(i - 1, 0), C - 3)
             w, gn = _JUMP_WEIGHTS[(j - j0, i - i0)]
-            vec[j, i] = w @ g[j0:j0 + 3, i0:i0 + 3].reshape(9, 2)
-            gain[j, i] = gn
-    return vec.reshape(-1, 2), gain.ravel()
+            block = ((j0 + np.arange(3))[:, None] * C + (i0 + np.arange(3))[None, :]).ravel()
+            W[j * C + i, block] = w
+            gain[j * C + i] = gn
+    return W, gain
 
 
 def grid_jump(corners: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> np.ndarray:
@@ -1084,6 +1223,18 @@ def _inner_disagreement(c: np.ndarray, board: Board) -> np.ndarray:
 
 def _grid_design(board: Board) -> np.ndarray | None:
     """Design matrix of a 2-D polynomial in the corner indices (cubic, or quadratic for small boards)."""
+    return _grid_design_cached(board.rows, board.cols)[0]
+
+
+@functools.lru_cache(maxsize=32)
+def _grid_design_cached(rows: int, cols: int):
+    """(design matrix or None, its pseudo-inverse or None) of a ``rows x cols`` grid: see :func:`_grid_design`."""
+    board = Board(cols=cols, rows=rows, square=1.0)
+    A = _grid_design_matrix(board)
+    return A, (None if A is None else np.linalg.pinv(A))
+
+
+def _grid_design_matrix(board: Board) -> np.ndarray | None:
     j, i = np.mgrid[0:board.rows, 0:board.cols]
     u = i.ravel() / max(board.cols - 1, 1)
     v = j.ravel() / max(board.rows - 1, 1)
@@ -1129,14 +1280,14 @@ def _robust_grid_fit(corners: np.ndarray, board: Board, threshold: float):
     spacing = max(1e-9, float(min(np.linalg.norm(np.diff(g, axis=1), axis=2).min(),
                                   np.linalg.norm(np.diff(g, axis=0), axis=2).min())))
     inlier = np.ones(len(c), dtype=bool)
+    coef = _grid_design_cached(board.rows, board.cols)[1] @ c  # the fit through all corners
     for _ in range(len(c) // 4):
-        coef, *_ = np.linalg.lstsq(A[inlier], c[inlier], rcond=None)
         res = np.linalg.norm(A @ coef - c, axis=1) / spacing
         worst = int(np.argmax(np.where(inlier, res, -1.0)))
         if res[worst] <= threshold or inlier.sum() <= A.shape[1] + 4:
             break
         inlier[worst] = False
-    coef, *_ = np.linalg.lstsq(A[inlier], c[inlier], rcond=None)
+        coef, *_ = np.linalg.lstsq(A[inlier], c[inlier], rcond=None)
     fitted = A @ coef
     return fitted, np.linalg.norm(fitted - c, axis=1) / spacing
 
