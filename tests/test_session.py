@@ -321,8 +321,7 @@ def test_the_walk_to_the_robot_over_ros_goes_through_the_session(short_bag, tmp_
     local one, number for number.
     """
     from ci import missing as missing_in_ci
-    from test_ros_bag_play import SYSTEM_PYTHON, _log, _missing_ros, _started, running_roscore
-    from test_ros_live import CAMERA_NODE, _wait
+    from ros_env import CAMERA_NODE, SYSTEM_PYTHON, _log, _missing_ros, _started, _wait, running_roscore
 
     from dtscal_lib import cli
 
