@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import duckietown as dt
 from ..camera import intrinsic_matrix, new_camera_matrix
-from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
+from .core import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 
 __all__ = ["check_distort_normalized", "check_undistort_normalized", "check_rectification_maps",
            "opencv_distort"]

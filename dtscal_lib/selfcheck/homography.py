@@ -16,7 +16,7 @@ import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
 from ..poses import board_homography, random_board_pose
-from . import Case, CheckFailed, Report, expect_close, expect_shape, num, run_check
+from .core import Case, CheckFailed, Report, expect_close, expect_shape, num, run_check
 from .projection import K_DUCKIE
 
 __all__ = [

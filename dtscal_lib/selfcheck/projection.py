@@ -18,7 +18,7 @@ import numpy as np
 from ..boards import DUCKIETOWN_BOARD
 from ..camera import intrinsic_matrix
 from ..poses import points_on_rays, random_board_pose
-from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
+from .core import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 
 __all__ = ["check_project_points", "K_DUCKIE", "K_SKEWED"]
 

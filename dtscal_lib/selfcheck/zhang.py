@@ -19,7 +19,7 @@ import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD
 from ..poses import board_homography, random_board_pose
-from . import Case, CheckFailed, Report, expect_close, expect_shape, run_check
+from .core import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 from .projection import K_DUCKIE, K_SKEWED
 
 __all__ = [

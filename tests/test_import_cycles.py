@@ -1,0 +1,75 @@
+"""No import cycle in the library (issue 15): the module-level imports of ``dtscal_lib`` form a DAG.
+
+Imports inside functions (deliberately lazy: cv2-free CLI start, the course layer from ``dtscal course``)
+are not part of the graph. A package whose ``__init__`` re-exports its modules must not be imported back by
+them (``selfcheck`` keeps its machinery in ``selfcheck/core.py`` for that reason).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1] / "dtscal_lib"
+
+
+def _graph() -> dict[str, set[str]]:
+    mods = {}
+    for p in ROOT.rglob("*.py"):
+        parts = ("dtscal_lib",) + p.relative_to(ROOT).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        mods[name] = p
+    graph: dict[str, set[str]] = {m: set() for m in mods}
+    for m, p in mods.items():
+        pkg = m if p.name == "__init__.py" else m.rsplit(".", 1)[0]
+        for node in ast.parse(p.read_text(encoding="utf-8")).body:
+            targets = []
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                    module = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    module = node.module or ""
+                targets = [f"{module}.{a.name}" if f"{module}.{a.name}" in mods else module for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            graph[m].update(t for t in targets if t in mods and t != m)
+    return graph
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}
+    path: list[str] = []
+
+    def visit(v: str) -> list[str] | None:
+        state[v] = 1
+        path.append(v)
+        for w in sorted(graph[v]):
+            if state.get(w) == 1:
+                return path[path.index(w):] + [w]
+            if w not in state and (found := visit(w)):
+                return found
+        state[v] = 2
+        path.pop()
+        return None
+
+    for v in sorted(graph):
+        if v not in state and (found := visit(v)):
+            return found
+    return None
+
+
+def test_the_graph_reads_the_library():
+    graph = _graph()
+    assert "dtscal_lib.quality" in graph["dtscal_lib.calibration"]  # one way only
+    assert "dtscal_lib.selfcheck.core" in graph["dtscal_lib.selfcheck.zhang"]
+
+
+def test_no_import_cycle():
+    assert _cycle(_graph()) is None, " -> ".join(_cycle(_graph()))
+
+
+def test_a_planted_cycle_is_found():
+    graph = _graph()
+    graph["dtscal_lib.quality"].add("dtscal_lib.calibration")
+    assert _cycle(graph) is not None
