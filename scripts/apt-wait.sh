@@ -40,3 +40,36 @@ apt_get() {  # apt_get WHO ARGS...: apt-get ARGS (with $SUDO), after the locks a
     apt_wait "$who"
     $SUDO env DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout="${APT_LOCK_WAIT:-1200}" "$@"
 }
+
+apt_sudo() {  # apt_sudo WHO: set SUDO for apt-get (empty as root), or say how to re-run and fail
+    SUDO=""
+    if [ "$(id -u)" -ne 0 ]; then
+        if command -v sudo >/dev/null 2>&1; then
+            SUDO="sudo"
+        else
+            echo "$1: need root (or sudo) to run apt-get; re-run as root." >&2
+            return 1
+        fi
+    fi
+    export DEBIAN_FRONTEND=noninteractive
+}
+
+apt_install_missing() {  # apt_install_missing WHO PACKAGE...: refresh the lists if apt does not know the
+    # first package yet, then install those of the packages that are not installed (waiting for the locks)
+    local who=$1 p
+    shift
+    if ! apt-cache policy "$1" 2>/dev/null | grep -q 'Candidate: [0-9]'; then
+        echo "$who: apt does not know $1 yet; running apt-get update"
+        apt_get "$who" update
+    fi
+    local missing=()
+    for p in "$@"; do
+        if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed'; then
+            missing+=("$p")
+        fi
+    done
+    if [ "${#missing[@]}" -gt 0 ]; then
+        echo "$who: installing ${missing[*]}"
+        apt_get "$who" install -y --no-install-recommends "${missing[@]}"
+    fi
+}

@@ -9,21 +9,9 @@ if command -v chromium >/dev/null 2>&1; then
     exit 0
 fi
 
-SUDO=""
-if [ "$(id -u)" -ne 0 ]; then
-    if command -v sudo >/dev/null 2>&1; then
-        SUDO="sudo"
-    else
-        echo "install-browser: need root (or sudo) to run apt-get; re-run as root." >&2
-        exit 1
-    fi
-fi
-export DEBIAN_FRONTEND=noninteractive
 # shellcheck source=apt-wait.sh
-source "$(dirname "$0")/apt-wait.sh"   # wait for another apt-get instead of failing
-if ! apt-cache policy chromium 2>/dev/null | grep -q 'Candidate: [0-9]'; then
-    apt_get install-browser update
-fi
-apt_get install-browser install -y --no-install-recommends chromium
+source "$(dirname "$0")/apt-wait.sh"   # waits for another apt-get instead of failing
+apt_sudo install-browser
+apt_install_missing install-browser chromium
 command -v chromium >/dev/null 2>&1 || { echo "install-browser: chromium still missing after apt-get" >&2; exit 1; }
 echo "install-browser: done; chromium at $(command -v chromium)"

@@ -21,37 +21,10 @@ if have_all; then
     exit 0
 fi
 
-SUDO=""
-if [ "$(id -u)" -ne 0 ]; then
-    if command -v sudo >/dev/null 2>&1; then
-        SUDO="sudo"
-    else
-        echo "install-ros: need root (or sudo) to run apt-get; re-run as root." >&2
-        exit 1
-    fi
-fi
-
-export DEBIAN_FRONTEND=noninteractive
 # shellcheck source=apt-wait.sh
-source "$(dirname "$0")/apt-wait.sh"   # wait for another apt-get instead of failing
-
-# refresh the package lists only when apt does not know the packages yet
-if ! apt-cache policy ros-core 2>/dev/null | grep -q 'Candidate: [0-9]'; then
-    echo "install-ros: apt does not know ros-core yet; running apt-get update"
-    apt_get install-ros update
-fi
-
-missing=()
-for p in "${PACKAGES[@]}"; do
-    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed'; then
-        missing+=("$p")
-    fi
-done
-
-if [ "${#missing[@]}" -gt 0 ]; then
-    echo "install-ros: installing ${missing[*]}"
-    apt_get install-ros install -y --no-install-recommends "${missing[@]}"
-fi
+source "$(dirname "$0")/apt-wait.sh"   # waits for another apt-get instead of failing
+apt_sudo install-ros
+apt_install_missing install-ros "${PACKAGES[@]}"
 
 if have_all; then
     echo "install-ros: done; roscore at $(command -v roscore), rosbag at $(command -v rosbag)"
