@@ -76,8 +76,8 @@ def _student_handin(tmp_path):
 
     import nbformat
 
-    from dtscal_lib import release as rel
-    from dtscal_lib.course import workspace as ws
+    from dtscal_lib.teaching import release as rel
+    from dtscal_lib.teaching import workspace as ws
     from nbtools import NOTEBOOKS
 
     root = tmp_path / "student"

@@ -3,7 +3,7 @@
 Flow: parse the submission (:mod:`.loader`, nothing runs), refuse credit for functions
 that call a solving routine, run the other functions' checks and the diagnosis probes in
 the sandbox (:mod:`.sandbox`), judge the answers against the references computed here
-(:mod:`.checks`), name the mistake (:mod:`dtscal_lib.selfcheck.diagnosis`).
+(:mod:`.checks`), name the mistake (:mod:`dtscal_lib.teaching.selfcheck.diagnosis`).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..selfcheck import diagnosis
+from ..teaching.selfcheck import diagnosis
 from . import substitutes
 from .loader import Submission, _called_names, load_submission, useful_import
 from .material import ASSIGNMENTS, Material

@@ -14,8 +14,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..boards import DUCKIETOWN_BOARD
-from ..poses import board_homography, random_board_pose
+from ...boards import DUCKIETOWN_BOARD
+from ...poses import board_homography, random_board_pose
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, num, run_check
 from .projection import K_DUCKIE
 

@@ -7,9 +7,9 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import camera as cam
-from ..boards import DUCKIETOWN_BOARD, Board
-from ..errors import DtscalError
+from ... import camera as cam
+from ...boards import DUCKIETOWN_BOARD, Board
+from ...errors import DtscalError
 from .figure import PHOTO_DPI, CourseFigure, new_figure
 from .projection import sample_views
 from .session import IntrinsicViews, board_homographies, find_corners

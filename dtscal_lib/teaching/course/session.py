@@ -14,10 +14,10 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from .. import camera as cam
-from .. import duckietown as dt
-from ..boards import DUCKIETOWN_BOARD, Board
-from ..errors import DtscalError
+from ... import camera as cam
+from ... import duckietown as dt
+from ...boards import DUCKIETOWN_BOARD, Board
+from ...errors import DtscalError
 from .projection import render_board_image, sample_views
 
 __all__ = ["find_corners", "board_homographies", "IntrinsicViews", "load_intrinsic_views",
@@ -31,7 +31,7 @@ def find_corners(image: np.ndarray, board: Board = DUCKIETOWN_BOARD, thorough: b
     ``thorough``, the still-frame detector that also runs OpenCV's full search
     (:func:`dtscal_lib.detect.detect_board_still`).
     """
-    from ..detect import detect_board, detect_board_still
+    from ...detect import detect_board, detect_board_still
 
     det = (detect_board_still if thorough else detect_board)(image, board)
     return np.asarray(det.corners, dtype=np.float64).reshape(-1, 2) if det.found else None
@@ -84,7 +84,7 @@ class IntrinsicViews:
 
 
 def _datasets():
-    from .. import datasets
+    from ... import datasets
 
     return datasets
 
@@ -202,7 +202,7 @@ def load_extrinsic_capture() -> ExtrinsicCapture:
     """
     truth = _load_truth()
     if truth is None:
-        from .. import synth
+        from ... import synth
 
         frames, etruth = synth.extrinsic_capture(n_frames=1)
         return ExtrinsicCapture(frames[0].image, synth.synthetic_camera(), np.asarray(etruth["homography"], float),

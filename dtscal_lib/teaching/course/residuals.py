@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import camera as cam
+from ... import camera as cam
 from .figure import CourseFigure, new_figure
 from .session import IntrinsicViews
 

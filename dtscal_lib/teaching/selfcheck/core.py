@@ -1,4 +1,4 @@
-"""The self-checks' machinery: cases, reports, comparisons (re-exported by :mod:`dtscal_lib.selfcheck`).
+"""The self-checks' machinery: cases, reports, comparisons (re-exported by :mod:`dtscal_lib.teaching.selfcheck`).
 
 The check modules (``projection``, ``homography``, ...) import it from here, so no module of the package
 imports the package itself.

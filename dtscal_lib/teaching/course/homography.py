@@ -7,9 +7,9 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from ..boards import DUCKIETOWN_BOARD, Board
-from ..duckietown import IMAGE_SIZE
-from ..homography import apply_homography, transfer_rms
+from ...boards import DUCKIETOWN_BOARD, Board
+from ...duckietown import IMAGE_SIZE
+from ...homography import apply_homography, transfer_rms
 from .fallback import Fallback
 from .figure import TRUTH_COLOR, CourseFigure, draw_board, image_axes, new_figure
 

@@ -13,7 +13,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import duckietown as dt
+from ... import duckietown as dt
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, nums, run_check
 
 __all__ = ["check_board_ground_points", "check_pixel_to_ground"]

@@ -27,12 +27,12 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from .. import duckietown as dt
-from ..boards import Board, ground_points
-from ..camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
-from ..camera import undistort_normalized as _newton_undistort
-from ..homography import apply_homography
-from ..poses import board_homography, random_board_pose
+from ... import duckietown as dt
+from ...boards import Board, ground_points
+from ...camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
+from ...camera import undistort_normalized as _newton_undistort
+from ...homography import apply_homography
+from ...poses import board_homography, random_board_pose
 from .projection import K_SKEWED
 
 __all__ = ["Mistake", "diagnose", "diagnose_function", "probe_args", "MISTAKES", "FUNCTIONS"]

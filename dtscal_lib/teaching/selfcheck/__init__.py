@@ -34,7 +34,7 @@ from .core import (
     strict,
 )
 
-# The notebooks import every check from here (``from dtscal_lib.selfcheck import check_...``).
+# The notebooks import every check from here (``from dtscal_lib.teaching.selfcheck import check_...``).
 from .projection import check_project_points  # noqa: E402
 from .homography import check_apply_homography, check_estimate_homography  # noqa: E402
 from .zhang import (  # noqa: E402

@@ -3,20 +3,20 @@
 Notebooks stay thin: they explain, hold the student's functions and their checks, and call
 this package for plumbing and pictures::
 
-    from dtscal_lib import course
+    from dtscal_lib.teaching import course
     project = course.use_or_fallback(project_points, stand_in, check=check_project_points,
                                      fallback_name="the kit's camera.project_points")
     course.projection_figure(project, K, poses, titles)      # a figure: the cell's last value
 
 Modules, each named after the concept it holds:
 
-* :mod:`~dtscal_lib.course.fallback`: the student's function or the kit's stand-in, said once
-* :mod:`~dtscal_lib.course.figure` (:mod:`dtscal_lib.figure`): pyplot-free figures shown as small PNGs
-* :mod:`~dtscal_lib.course.session`: the recorded session through :mod:`dtscal_lib.datasets`
-* :mod:`~dtscal_lib.course.projection`, :mod:`~dtscal_lib.course.homography`,
-  :mod:`~dtscal_lib.course.calibration`, :mod:`~dtscal_lib.course.residuals`,
-  :mod:`~dtscal_lib.course.distortion`, :mod:`~dtscal_lib.course.ground`: figures and experiments
-* :mod:`~dtscal_lib.course.workspace`: the student's workspace copy and its updates
+* :mod:`~dtscal_lib.teaching.course.fallback`: the student's function or the kit's stand-in, said once
+* :mod:`~dtscal_lib.teaching.course.figure` (:mod:`dtscal_lib.figure`): pyplot-free figures shown as small PNGs
+* :mod:`~dtscal_lib.teaching.course.session`: the recorded session through :mod:`dtscal_lib.datasets`
+* :mod:`~dtscal_lib.teaching.course.projection`, :mod:`~dtscal_lib.teaching.course.homography`,
+  :mod:`~dtscal_lib.teaching.course.calibration`, :mod:`~dtscal_lib.teaching.course.residuals`,
+  :mod:`~dtscal_lib.teaching.course.distortion`, :mod:`~dtscal_lib.teaching.course.ground`: figures and experiments
+* :mod:`~dtscal_lib.teaching.workspace`: the student's workspace copy and its updates
 """
 
 from .calibration import (degradation_experiment, intrinsics_table, plot_board_poses, pose_from_homography_opencv,

@@ -6,13 +6,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .. import camera as cam
-from .. import duckietown as dt
-from ..boards import DUCKIETOWN_BOARD, Board
-from ..duckietown import IMAGE_SIZE
-from ..errors import DtscalError
-from ..poses import look_at_pose, random_board_pose
-from ..synth import make_renderer
+from ... import camera as cam
+from ... import duckietown as dt
+from ...boards import DUCKIETOWN_BOARD, Board
+from ...duckietown import IMAGE_SIZE
+from ...errors import DtscalError
+from ...poses import look_at_pose, random_board_pose
+from ...synth import make_renderer
 from .fallback import Fallback
 from .figure import CourseFigure, draw_board, image_axes, new_figure, png_bytes
 
@@ -56,7 +56,7 @@ def projection_figure(project: Callable, K: np.ndarray, poses: Sequence[tuple], 
     Parameters
     ----------
     project : ``project_points(K, R, t, X) -> (N, 2)``, usually the notebook's
-        :class:`~dtscal_lib.course.fallback.Fallback` (the student's function or the stand-in)
+        :class:`~dtscal_lib.teaching.course.fallback.Fallback` (the student's function or the stand-in)
     K : (3, 3) intrinsic matrix, or a list of them (one per pose)
     poses : list of (R (3, 3), t (3,)) board -> camera
     titles : one per pose

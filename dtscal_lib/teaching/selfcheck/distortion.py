@@ -13,8 +13,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import duckietown as dt
-from ..camera import intrinsic_matrix, new_camera_matrix
+from ... import duckietown as dt
+from ...camera import intrinsic_matrix, new_camera_matrix
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 
 __all__ = ["check_distort_normalized", "check_undistort_normalized", "check_rectification_maps",
@@ -93,7 +93,7 @@ def _case_undistort(dist, xy_true_fn, title, hint, tol=1e-8) -> Case:
 def _duckiebot_field(region: str):
     """Undistorted normalized points whose distorted images fill (part of) the Duckiebot image."""
     K, d = dt.default_K(), dt.default_dist()
-    from ..camera import undistort_normalized as _lib_undistort  # the library's Newton solver
+    from ...camera import undistort_normalized as _lib_undistort  # the library's Newton solver
 
     xy_d = _image_normalized(K, dt.IMAGE_SIZE, 32)
     r = np.hypot(xy_d[:, 0], xy_d[:, 1])

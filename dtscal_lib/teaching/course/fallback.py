@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ..errors import DtscalError
+from ...errors import DtscalError
 
 __all__ = ["Fallback", "use_or_fallback", "banner", "notebook_function"]
 
@@ -132,7 +132,7 @@ def notebook_function(nb_name: str, func: str, nb_dir=None) -> Callable | None:
 
     Runs that notebook's cell tagged ``imports`` and its cells tagged ``exercise`` in a
     fresh namespace (the rest of the notebook is not run), with
-    :func:`dtscal_lib.release.notebook_functions`: the student's code or the
+    :func:`dtscal_lib.teaching.release.notebook_functions`: the student's code or the
     ``NotImplementedError`` stub. ``nb_dir`` defaults to the current folder (where Jupyter
     runs the notebook: the student's workspace). Prints why and returns None when the
     function cannot be loaded.

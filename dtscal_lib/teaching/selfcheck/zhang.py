@@ -6,7 +6,7 @@ OpenCV's ``solvePnP`` for the board pose). Nothing here contains the exercise so
 the expected values come from the camera's definition (``H = K [r1 r2 t]``), not from a
 second implementation of the student's formulas.
 
->>> from dtscal_lib.selfcheck.zhang import check_intrinsic_constraints
+>>> from dtscal_lib.teaching.selfcheck.zhang import check_intrinsic_constraints
 >>> check_intrinsic_constraints(my_function)   # doctest: +SKIP
 """
 
@@ -17,8 +17,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..boards import DUCKIETOWN_BOARD
-from ..poses import board_homography, random_board_pose
+from ...boards import DUCKIETOWN_BOARD
+from ...poses import board_homography, random_board_pose
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 from .projection import K_DUCKIE, K_SKEWED
 

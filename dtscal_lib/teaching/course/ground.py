@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..boards import DUCKIETOWN_BOARD, Board
-from ..ground import birdseye_view, draw_ground_grid, ground_to_pixel, pixel_to_ground
+from ...boards import DUCKIETOWN_BOARD, Board
+from ...ground import birdseye_view, draw_ground_grid, ground_to_pixel, pixel_to_ground
 from .figure import PHOTO_DPI, CourseFigure, new_figure, show_image
 
 __all__ = ["plot_ground_layout", "ground_error_mm", "ground_error_report", "show_ground_result"]

@@ -39,7 +39,7 @@ from pathlib import Path
 import nbformat
 
 from ..errors import DtscalError
-from ..release import BEGIN_YOURS, END_YOURS
+from .release import BEGIN_YOURS, END_YOURS
 
 __all__ = ["WORKSPACE", "BEGIN_YOURS", "END_YOURS", "ensure_workspace", "update_workspace", "UpdateReport",
            "student_regions", "KEPT_TAG"]
@@ -94,7 +94,7 @@ def ensure_workspace(root) -> Path:
 
 def _regions(source: str, where: str) -> dict[str, tuple[int, int]]:
     """``### BEGIN YOUR CODE`` .. ``END`` regions of a cell: function name -> (begin line, end line)."""
-    from ..release import find_regions
+    from .release import find_regions
 
     return {func: (b, e) for b, e, func in find_regions(source, where, begin=BEGIN_YOURS, end=END_YOURS)}
 

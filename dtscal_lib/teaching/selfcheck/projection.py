@@ -5,7 +5,7 @@ against OpenCV's ``cv2.projectPoints`` and against pixels known by construction 
 is chosen first and a 3-D point placed on its ray), never against a second copy of the
 solution.
 
-Later cells use the course's one fallback contract, :func:`dtscal_lib.course.use_or_fallback`.
+Later cells use the course's one fallback contract, :func:`dtscal_lib.teaching.course.use_or_fallback`.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..boards import DUCKIETOWN_BOARD
-from ..camera import intrinsic_matrix
-from ..poses import points_on_rays, random_board_pose
+from ...boards import DUCKIETOWN_BOARD
+from ...camera import intrinsic_matrix
+from ...poses import points_on_rays, random_board_pose
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 
 __all__ = ["check_project_points", "K_DUCKIE", "K_SKEWED"]

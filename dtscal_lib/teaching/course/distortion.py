@@ -7,8 +7,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import camera as cam
-from .. import duckietown as dt
+from ... import camera as cam
+from ... import duckietown as dt
 from .fallback import Fallback
 from .figure import CourseFigure, new_figure, show_images
 
@@ -74,7 +74,7 @@ def plot_undistortion_error(undistort: Callable, K, dist, size=dt.IMAGE_SIZE, st
     distorted again with OpenCV's model; the map shows the round-trip error in pixels (log
     scale, floored at 1e-12 px). OpenCV's ``undistortPoints`` stops after a fixed 5
     fixed-point iterations. ``label`` names the left panel (default: from the notebook's
-    :class:`~dtscal_lib.course.fallback.Fallback`, "your undistort_normalized" or the
+    :class:`~dtscal_lib.teaching.course.fallback.Fallback`, "your undistort_normalized" or the
     stand-in). Titles give the worst error as a bound below 1e-9 px (round-off digits are
     not shown: they differ between machines).
     """

@@ -39,7 +39,7 @@ from typing import Callable, Iterable
 import nbformat
 from nbformat import NotebookNode
 
-from .errors import DtscalError
+from ..errors import DtscalError
 
 BEGIN = "### BEGIN SOLUTION"
 END = "### END SOLUTION"
@@ -497,7 +497,7 @@ def release(out_dir, repo_root=None) -> Path:
         If ``out_dir`` is unsafe (inside the checkout's sources, or a non-empty folder not
         written by a release) or a solution line leaked into the release.
     """
-    from .paths import repo_root as default_root
+    from ..paths import repo_root as default_root
 
     root = Path(repo_root if repo_root is not None else default_root()).resolve()
     out = Path(out_dir).resolve()
