@@ -209,7 +209,7 @@ def rectification_maps_fast(cam):
     """
     if cam.K[0, 1] != 0.0:
         return cam.rectification_maps()
-    return cv2.initUndistortRectifyMap(cam.K, cam.dist, None, cam.rectified_K, cam.size, cv2.CV_32FC1)
+    return cam.opencv_maps()
 
 
 def outline_thumb(corners: np.ndarray, size, width: int = 96) -> bytes:
