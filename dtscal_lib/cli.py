@@ -27,6 +27,8 @@ from pathlib import Path
 
 from .errors import CalibrationFileWarning, DtscalError, ImplausibleCalibrationError
 
+#: camera.DIST_MODELS, written out so that the command starts without importing OpenCV (a test keeps them equal)
+_MODELS = ("plumb_bob", "radial2", "rational_polynomial", "equidistant")
 #: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
 EXIT_REFUSED = 3
 #: library keyword spellings in messages -> the flags of this command
@@ -168,6 +170,40 @@ def cmd_calibrate_extrinsics(args) -> int:
     return _report_doubts(run)
 
 
+def cmd_compare(args) -> int:
+    """``dtscal compare A.yaml B.yaml``: mrcal's projection difference of B against A (dtscal_lib.compare)."""
+    from .calib_files import load_intrinsics
+    from .compare import PLACES, projection_difference, write_figure
+
+    a, b = load_intrinsics(args.a), load_intrinsics(args.b)
+    comp = projection_difference(a, b, gridn_width=args.gridn, names=(str(args.a), str(args.b)))
+    figure = None
+    if args.report:
+        out = Path(args.report)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            figure = out / "compare.png"
+            write_figure(comp, figure)
+        except OSError as e:
+            raise DtscalError(f"--report {args.report}: cannot write the figure ({e}); "
+                              "choose a writable folder") from None
+    if args.json:
+        _print_json({**comp.to_dict(), "figure": str(figure) if figure else None})
+        return 0
+    print(f"{args.b} against {args.a} ({a.model} / {b.model}, {a.width}x{a.height}): after a rotation of "
+          f"{comp.rotation_deg:.3f} deg (fitted within {comp.focus_radius:.0f} px of the centre, as mrcal does)")
+    print(f"  max {comp.max_px:.3f} px, RMS {comp.rms_px:.3f} px over a {comp.diff.shape[1]}x{comp.diff.shape[0]} grid"
+          + (f"; {comp.n_unprojectable} grid points cannot be unprojected by a model" if comp.n_unprojectable else ""))
+    for name in PLACES:
+        v = comp.at[name]
+        print(f"  {name:12s} ({v['pixel'][0]:6.1f}, {v['pixel'][1]:6.1f}): {v['diff_px']:.3f} px")
+    print("  (a ROS calibration file carries no uncertainty: compare with the calibrations' own sigma in "
+          "notebook 06 or with calibrate-intrinsics --cross-validate)")
+    if figure:
+        print(f"wrote {figure}")
+    return 0
+
+
 def cmd_synth(args) -> int:
     from .synth import generate
     from .validation import check_output_folder, check_seed
@@ -272,7 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
     common(sp)
-    sp.add_argument("--model", choices=["plumb_bob", "radial2"], default="plumb_bob")
+    sp.add_argument("--model", choices=_MODELS, default="plumb_bob",
+                    help="lens model: plumb_bob (k3 = 0, as ROS), radial2 (Zhang's k1, k2), rational_polynomial "
+                         "(k1-k6, p1, p2) or equidistant (fisheye); the last two are calibrated by OpenCV")
     sp.add_argument("--skew", action="store_true", help="also estimate the skew of K (own refinement)")
     sp.add_argument("--image-size", metavar="WxH",
                     help="size of the frames to calibrate (default: the size in which the board is found most)")
@@ -287,6 +325,14 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "
                     "http://ROBOT.local/files/data/config/calibrations/camera_extrinsic/ROBOT.yaml)")
     sp.set_defaults(func=cmd_calibrate_extrinsics)
+
+    sp = sub.add_parser("compare", help="how far two intrinsic calibrations of one camera differ over the image")
+    sp.add_argument("a", help="intrinsic file (camera_intrinsic/NAME.yaml), e.g. the robot's current one")
+    sp.add_argument("b", help="intrinsic file to compare with it, e.g. the new calibration")
+    sp.add_argument("--gridn", type=int, default=60, help="grid points across the image (default 60, as mrcal)")
+    sp.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
+    sp.add_argument("--report", metavar="DIR", help="write the difference map DIR/compare.png")
+    sp.set_defaults(func=cmd_compare)
 
     sp = sub.add_parser("synth", help="regenerate the synthetic recorded Duckiebot session")
     sp.add_argument("--out", default="data", help="data folder (default ./data)")

@@ -149,7 +149,9 @@ class Comparison:
 
     @property
     def rotation_deg(self) -> float:
-        return float(np.degrees(np.arccos(np.clip((np.trace(self.rotation) - 1) / 2, -1, 1))))
+        R = self.rotation  # atan2 of sin and cos: precise at small angles, where arccos of the trace is not
+        sin = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+        return float(np.degrees(np.arctan2(sin, (np.trace(R) - 1) / 2)))
 
     @property
     def n_unprojectable(self) -> int:
