@@ -443,7 +443,7 @@ class IntrinsicCalibration(CameraModel):
         if model not in SUPPORTED_MODELS:
             raise _fail(where, f"distortion_model is {model!r}; expected one of {sorted(SUPPORTED_MODELS)}")
         K = _matrix(doc, "camera_matrix", 3, 3, where)
-        D = _matrix(doc, "distortion_coefficients", 1, SUPPORTED_MODELS[model], where).ravel()
+        D = _matrix(doc, "distortion_coefficients", 1, None, where).ravel()  # its length: checked below, by model
         R = _matrix(doc, "rectification_matrix", 3, 3, where)
         P = _read_P(_matrix(doc, "projection_matrix", 3, 4, where), where)
         _check_intrinsic_values(width, height, K, model, D, R, P, where)
