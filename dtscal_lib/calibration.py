@@ -245,7 +245,8 @@ def calibrate_opencv(object_points, image_points, image_size, model: str) -> Cal
     Why OpenCV's solver and not the kit's: the kit's refinement (``_Problem``) has the analytic Jacobian of
     the 5-term polynomial only; for these two models ROS's calibrator calls ``cv2.calibrateCamera`` with
     ``CALIB_RATIONAL_MODEL`` and ``cv2.fisheye.calibrate``, so using the same calls gives the robot exactly
-    the calibration ROS would (OpenCV's default stopping rules, as ROS passes none). ``std`` is OpenCV's noise-model standard deviation for rational_polynomial
+    the calibration ROS would (OpenCV's default stopping rules, as ROS passes none). ``std`` is OpenCV's
+    noise-model standard deviation for rational_polynomial
     (``calibrateCameraExtended``); ``cv2.fisheye`` reports none, so ``std`` is empty for equidistant.
     """
     if model not in OPENCV_FLAGS:
