@@ -97,9 +97,10 @@ def cmd_calibrate_intrinsics(args) -> int:
     from .report import quality_for_run  # verdict; warnings on stderr; figures + index.html with --report
 
     quality = quality_for_run(run, args.report)
+    xval = _cross_validate(args, run)
     committed, failed = _commit(args, run, "intrinsics")
     if args.json:
-        _print_json({**run.to_dict(), "quality": quality.to_dict(),
+        _print_json({**run.to_dict(), "quality": quality.to_dict(), "cross_validation": xval,
                      "report": str(quality.report_path) if quality.report_path else None,
                      "commit": committed, "commit_error": failed and str(failed)})
     else:
@@ -112,6 +113,13 @@ def cmd_calibrate_intrinsics(args) -> int:
             print(f"  {n:5s} = {v:10.4f} +- {r.std.get(n, float('nan')):.4f}")
         print("  dist  = [" + ", ".join(f"{d:.6f}" for d in r.dist) + "]")
         print("\n".join(quality.summary_lines(r.std_method)))  # sigma's method, what it means for a robot
+        if xval is not None:
+            print(f"  cross-validation ({len(xval['ratios'])} random half splits): half-set difference / "
+                  "predicted sigma")
+            for i, r in enumerate(xval["ratios"]):
+                print(f"    split {i}: corners {r['corners']:.2f}, inside {r['inside']:.2f} (max {r['max_px']:.2f} px)")
+            if xval["finding"]:
+                print(f"  cross-validation: {xval['finding']['message']}; {xval['finding']['advice']}")
         if run.tally.rejected:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
@@ -123,6 +131,21 @@ def cmd_calibrate_intrinsics(args) -> int:
     if failed:  # after the result is printed: nothing computed is lost
         raise failed
     return _report_doubts(run)
+
+
+def _cross_validate(args, run):
+    """--cross-validate: the views' random halves against their predicted uncertainty (dtscal_lib.compare)."""
+    if not args.cross_validate:
+        return None
+    from .compare import cross_validate
+
+    r = run.result
+    cv = cross_validate(r.object_points, r.image_points, r.image_size, model=r.model, skew=r.skew,
+                        splits=args.cross_validate)
+    finding = cv.finding()
+    if finding is not None:
+        print(f"dtscal: warning: {finding.warning()}", file=sys.stderr)
+    return {**cv.to_dict(), "finding": finding.to_dict() if finding else None}
 
 
 def _commit(args, run, kind: str):
@@ -315,6 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--image-size", metavar="WxH",
                     help="size of the frames to calibrate (default: the size in which the board is found most)")
     sp.add_argument("--report", metavar="DIR", help="write figures and DIR/index.html on how good the calibration is")
+    sp.add_argument("--cross-validate", nargs="?", type=int, const=5, default=0, metavar="SPLITS",
+                    help="calibrate random halves of the views (default 5 splits) and compare them against their "
+                         "predicted uncertainty (plumb_bob and radial2)")
     sp.set_defaults(func=cmd_calibrate_intrinsics)
 
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")

@@ -267,3 +267,100 @@ def write_figure(comp: Comparison, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------- cross-validation
+#: how many random half splits ``--cross-validate`` makes by default, and the seed of the first
+CROSS_VALIDATE_SPLITS = 5
+CROSS_VALIDATE_SEED = 0
+
+
+def half_splits(n_views: int, splits: int = CROSS_VALIDATE_SPLITS, seed: int = CROSS_VALIDATE_SEED):
+    """``splits`` seeded random splits of ``n_views`` views into two halves (sorted index lists)."""
+    if n_views < 6:
+        raise DtscalError(f"cross-validation splits the views in two halves of at least 3 (a calibration's "
+                          f"minimum); {n_views} views are too few: collect at least 6")
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(int(splits)):
+        perm = rng.permutation(n_views)
+        out.append((sorted(perm[: n_views // 2].tolist()), sorted(perm[n_views // 2:].tolist())))
+    return out
+
+
+def _inside(pixels: np.ndarray, size) -> np.ndarray:
+    """Grid points of the central two thirds of the image (a sixth of each side left out)."""
+    w, h = size
+    u, v = pixels[..., 0], pixels[..., 1]
+    return (u >= w / 6) & (u <= w - 1 - w / 6) & (v >= h / 6) & (v <= h - 1 - h / 6)
+
+
+@dataclass
+class CrossValidation:
+    """Half-set calibrations against each other, judged by their predicted uncertainty.
+
+    For each split: ``corners`` the largest difference / sigma at the four image corners, ``inside`` the
+    largest over the central two thirds of the image (NaN where a half cannot unproject). A calibration whose
+    predicted uncertainty is honest gives ratios of about 1 (the difference of two independent estimates is
+    within 2 sigma 95 % of the time).
+    """
+
+    splits: list
+    comparisons: list
+    size: tuple[int, int]
+
+    def ratios(self) -> list[dict]:
+        out = []
+        for c in self.comparisons:
+            r = c.diff / c.sigma
+            corner = [c.at[p]["ratio"] for p in PLACES[1:]]
+            inner = r[_inside(c.pixels, self.size)]
+            out.append({"corners": float(np.nanmax(corner)) if np.isfinite(corner).any() else float("nan"),
+                        "inside": float(np.nanmax(inner)) if np.isfinite(inner).any() else float("nan"),
+                        "max_px": c.max_px})
+        return out
+
+    def finding(self, limit: float | None = None):
+        """A :class:`~dtscal_lib.findings.Finding` when the halves differ by more than their uncertainty says
+        (``doubtful``: the stated sigma is too small or the model does not fit the lens), else None."""
+        from .findings import Finding
+        from .limits import CROSS_VALIDATION_RATIO
+
+        limit = CROSS_VALIDATION_RATIO if limit is None else limit
+        r = self.ratios()
+        inside = float(np.nanmedian([x["inside"] for x in r]))
+        corners = float(np.nanmedian([x["corners"] for x in r]))
+        if not (inside > limit):
+            return None
+        return Finding(
+            "cross_validation", "doubtful",
+            f"calibrations of two halves of the views differ by {inside:.1f} times their predicted uncertainty "
+            f"inside the image (median of {len(r)} random splits; {corners:.1f} at the corners): the stated "
+            "sigma is too small for these views, or the lens model does not fit",
+            "collect more views covering the whole image, or try a richer lens model (--model)")
+
+    def to_dict(self) -> dict:
+        return {"splits": [[list(map(int, a)), list(map(int, b))] for a, b in self.splits],
+                "ratios": self.ratios()}
+
+
+def cross_validate(object_points, image_points, image_size, *, model: str = "plumb_bob", skew: bool = False,
+                   splits: int = CROSS_VALIDATE_SPLITS, seed: int = CROSS_VALIDATE_SEED) -> CrossValidation:
+    """Calibrate random halves of the views and compare each pair against their predicted uncertainty.
+
+    The kit's own solver (plumb_bob, radial2) only: OpenCV's models carry no projection uncertainty.
+    """
+    from .calibration import calibrate
+
+    if model not in ("plumb_bob", "radial2"):
+        raise DtscalError(f"--cross-validate needs the calibrations' projection uncertainty, which the kit computes "
+                          f"for its own solver's models (plumb_bob, radial2), not for {model}")
+    halves = half_splits(len(object_points), splits, seed)
+    comps = []
+    for a, b in halves:
+        ra = calibrate([object_points[i] for i in a], [image_points[i] for i in a], image_size, model=model,
+                       skew=skew)
+        rb = calibrate([object_points[i] for i in b], [image_points[i] for i in b], image_size, model=model,
+                       skew=skew)
+        comps.append(projection_difference(ra, rb, names=("half A", "half B")))
+    return CrossValidation(halves, comps, tuple(image_size))
