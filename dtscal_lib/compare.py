@@ -216,10 +216,11 @@ def projection_difference(a, b, *, gridn_width: int = GRIDN_WIDTH, gridn_height:
                           names: tuple[str, str] = ("A", "B")) -> Comparison:
     """Compare calibration ``b`` with ``a`` (each a camera, a calibration result or a file path).
 
-    With ``uncertainty`` and both ``a`` and ``b`` calibration results that carry their views, the rotation
-    is fitted over the whole image weighted by ``1 / (sigma_a sigma_b)^2`` (mrcal's default) and the
-    difference is judged against ``sqrt(sigma_a^2 + sigma_b^2)``; otherwise the fit uses the pixels within
-    ``focus_radius`` (default ``min(W, H) / 6``, mrcal's) of the centre.
+    With ``uncertainty`` and ``a`` and ``b`` calibration results that carry their views, the rotation is
+    fitted over the whole image weighted by ``1 / (sigma_a sigma_b)^2`` (mrcal's default) and the difference
+    is judged against ``sqrt(sigma_a^2 + sigma_b^2)``; with one of them a result and the other a file, against
+    the result's own sigma (the file's taken as equal to it in the weights); with neither, the fit uses the
+    pixels within ``focus_radius`` (default ``min(W, H) / 6``, mrcal's) of the centre.
     """
     ca, cb = as_camera(a), as_camera(b)
     if tuple(ca.size) != tuple(cb.size):
@@ -232,8 +233,12 @@ def projection_difference(a, b, *, gridn_width: int = GRIDN_WIDTH, gridn_height:
     sb = _sigma_of(b, flat) if uncertainty else None
     w, h = ca.size
     centre = np.array([(w - 1) / 2, (h - 1) / 2])
-    if sa is not None and sb is not None:
-        weights = (1.0 / (sa * sb)) ** 2
+    if sa is not None or sb is not None:
+        # mrcal's weights 1 / (sigma_a sigma_b)^2; with one calibration's sigma only (a new calibration against
+        # a file), the other is taken as equal to it
+        s0 = sa if sa is not None else sb
+        s1 = sb if sb is not None else sa
+        weights = (1.0 / (s0 * s1)) ** 2
         radius = float("inf") if focus_radius is None else float(focus_radius)
     else:
         weights = np.ones(len(flat))
@@ -246,7 +251,10 @@ def projection_difference(a, b, *, gridn_width: int = GRIDN_WIDTH, gridn_height:
     if fin.any():
         q1[fin] = project_rays(rays[fin], cb.K, cb.dist, cb.model)
     diff = np.linalg.norm(q1 - flat, axis=1).reshape(q0.shape[:2])
-    sigma = None if sa is None or sb is None else np.sqrt(sa ** 2 + sb ** 2).reshape(q0.shape[:2])
+    # the 1-sigma of the difference: both calibrations' when both are known, else the one known (a file carries
+    # none: the difference is then judged against the new calibration's own uncertainty)
+    known = [x for x in (sa, sb) if x is not None]
+    sigma = np.sqrt(sum(x ** 2 for x in known)).reshape(q0.shape[:2]) if known else None
     return Comparison(q0, diff, R, radius, sigma, names)
 
 

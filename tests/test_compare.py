@@ -201,3 +201,46 @@ def test_cross_validate_flag_prints_the_splits(tmp_path, capsys):
     xv = out["cross_validation"]
     assert len(xv["splits"]) == 2 and len(xv["ratios"]) == 2
     assert all(sorted(a + b) == list(range(13)) for a, b in xv["splits"])
+
+
+# --------------------------------------------------------------------------- notebook 06: after CALIBRATE
+def test_the_live_calibrator_compares_the_new_calibration_with_the_robot_s_file(tmp_path):
+    """On the recording (synthbot, a camera close to Duckietown's factory file): CALIBRATE's results say how far
+    the new calibration is from the robot's current file; a robot file 5 % off in focal length is far outside
+    the new calibration's uncertainty (5 % of fx at the image corner is ~20 px; its sigma there is ~1 px)."""
+    from dtscal_lib.datasets import session_dir
+    from dtscal_lib.sources import open_source
+    from dtscal_lib.ui import LiveCalibrator
+
+    bag = session_dir() / "intrinsics.bag"
+    if not bag.exists():
+        missing(f"the recorded session {bag} is missing (dtscal synth --out data)")
+    app = LiveCalibrator(str(bag), autostart=False, calibration_dir=str(tmp_path))
+    try:
+        for f in open_source(bag):
+            if f.ok:
+                app.loop.step(f)
+        assert app.calibrate(wait=True) is not None
+        for _ in range(1200):  # the verdict follows the result in the calibration's thread; safety net only
+            if "dtscal-against" in app.results.value:
+                break
+            import time
+
+            time.sleep(0.1)
+        html_text = app.results.value
+        assert "dtscal-against" in html_text
+        sentence = app.compare_with_robot(str(tmp_path))
+        assert sentence.startswith("The new calibration differs from the robot's file (Duckietown's factory "
+                                   "default.yaml) by at most ")
+        assert sentence.endswith("within its uncertainty: COMMIT changes little.")
+        # the robot's own file, 5 % off in focal length
+        cam = app.result.camera()
+        K = cam.K.copy()
+        K[0, 0] *= 1.05
+        K[1, 1] *= 1.05
+        save_intrinsics(IntrinsicCalibration.from_camera(CameraModel(K, cam.dist, cam.size), "synthbot"), tmp_path,
+                        app.robot)
+        far = app.compare_with_robot(str(tmp_path))
+        assert f"camera_intrinsic/{app.robot}.yaml" in far and "COMMIT changes what the robot sees" in far
+    finally:
+        app.close()

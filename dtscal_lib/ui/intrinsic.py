@@ -53,7 +53,8 @@ class LiveCalibrator(IntrinsicDriver):
     board : the calibration board (default Duckietown's 7x5 inner corners, 31 mm)
     robot : robot name for the files (default: from the source)
     calibration_dir : folder that receives ``camera_intrinsic/<ROBOT>.yaml`` on an offline COMMIT
-    model : ``"plumb_bob"`` (ROS default) or ``"radial2"``
+    model : ``"plumb_bob"`` (ROS default), ``"radial2"``, ``"rational_polynomial"`` or ``"equidistant"`` (ROS's
+        other two, calibrated by OpenCV)
     realtime, loop : recordings: play at the recorded rate (or as fast as possible); replay at the end
     autostart : start the frame loop at once
     """
@@ -193,7 +194,9 @@ class LiveCalibrator(IntrinsicDriver):
         super()._verdict(result, quality)
         verdict = verdict_html(quality)
         if verdict:
-            self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from, verdict)
+            against = self.compare_with_robot(self.folder_text.value.strip() or ".")
+            self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from, verdict,
+                                                         against)
 
     def _calibrate_ended(self) -> None:
         self.calibrate_button.disabled = not self.background.can_start()
