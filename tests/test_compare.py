@@ -204,10 +204,9 @@ def test_cross_validate_flag_prints_the_splits(tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- notebook 06: after CALIBRATE
-def test_the_live_calibrator_compares_the_new_calibration_with_the_robot_s_file(tmp_path):
-    """On the recording (synthbot, a camera close to Duckietown's factory file): CALIBRATE's results say how far
-    the new calibration is from the robot's current file; a robot file 5 % off in focal length is far outside
-    the new calibration's uncertainty (5 % of fx at the image corner is ~20 px; its sigma there is ~1 px)."""
+@pytest.fixture(scope="module")
+def stepped(tmp_path_factory):
+    """The live calibrator having seen every frame of the recording (stepped, no thread: deterministic)."""
     from dtscal_lib.datasets import session_dir
     from dtscal_lib.sources import open_source
     from dtscal_lib.ui import LiveCalibrator
@@ -215,32 +214,51 @@ def test_the_live_calibrator_compares_the_new_calibration_with_the_robot_s_file(
     bag = session_dir() / "intrinsics.bag"
     if not bag.exists():
         missing(f"the recorded session {bag} is missing (dtscal synth --out data)")
-    app = LiveCalibrator(str(bag), autostart=False, calibration_dir=str(tmp_path))
-    try:
-        for f in open_source(bag):
-            if f.ok:
-                app.loop.step(f)
-        assert app.calibrate(wait=True) is not None
-        for _ in range(1200):  # the verdict follows the result in the calibration's thread; safety net only
-            if "dtscal-against" in app.results.value:
-                break
-            import time
+    app = LiveCalibrator(str(bag), autostart=False, calibration_dir=str(tmp_path_factory.mktemp("calibrations")))
+    for f in open_source(bag):
+        if f.ok:
+            app.loop.step(f)
+    yield app
+    app.close()
 
-            time.sleep(0.1)
-        html_text = app.results.value
-        assert "dtscal-against" in html_text
-        sentence = app.compare_with_robot(str(tmp_path))
-        assert sentence.startswith("The new calibration differs from the robot's file (Duckietown's factory "
-                                   "default.yaml) by at most ")
-        assert sentence.endswith("within its uncertainty: COMMIT changes little.")
-        # the robot's own file, 5 % off in focal length
-        cam = app.result.camera()
-        K = cam.K.copy()
-        K[0, 0] *= 1.05
-        K[1, 1] *= 1.05
-        save_intrinsics(IntrinsicCalibration.from_camera(CameraModel(K, cam.dist, cam.size), "synthbot"), tmp_path,
-                        app.robot)
-        far = app.compare_with_robot(str(tmp_path))
-        assert f"camera_intrinsic/{app.robot}.yaml" in far and "COMMIT changes what the robot sees" in far
-    finally:
-        app.close()
+
+def test_the_live_calibrator_compares_the_new_calibration_with_the_robot_s_file(stepped, tmp_path):
+    """On the recording (synthbot, a camera close to Duckietown's factory file): CALIBRATE's results say how far
+    the new calibration is from the robot's current file; a robot file 5 % off in focal length is far outside
+    the new calibration's uncertainty (5 % of fx at the image corner is ~20 px; its sigma there is ~1 px)."""
+    import time
+
+    app = stepped
+    app.folder_text.value = str(tmp_path)
+    app.set_model("plumb_bob")
+    assert app.calibrate(wait=True) is not None
+    for _ in range(1200):  # the verdict follows the result in the calibration's thread; a safety net only
+        if "dtscal-against" in app.results.value:
+            break
+        time.sleep(0.1)
+    assert "dtscal-against" in app.results.value
+    sentence = app.compare_with_robot(str(tmp_path))
+    assert sentence.startswith("The new calibration differs from the robot's file (Duckietown's factory "
+                               "default.yaml) by at most ")
+    assert sentence.endswith("within its uncertainty: COMMIT changes little.")
+    # the robot's own file, 5 % off in focal length
+    cam = app.result.camera()
+    K = cam.K.copy()
+    K[0, 0] *= 1.05
+    K[1, 1] *= 1.05
+    save_intrinsics(IntrinsicCalibration.from_camera(CameraModel(K, cam.dist, cam.size), "synthbot"), tmp_path,
+                    app.robot)
+    far = app.compare_with_robot(str(tmp_path))
+    assert f"camera_intrinsic/{app.robot}.yaml" in far and "COMMIT changes what the robot sees" in far
+
+
+def test_the_live_calibrator_calibrates_the_lens_model_chosen(stepped):
+    """The lens-model choice reaches CALIBRATE: an equidistant calibration of the recording has 4 coefficients
+    and the results panel names them."""
+    app = stepped
+    app.model_choice.value = "equidistant"
+    r = app.calibrate(wait=True)
+    assert r is not None and r.model == "equidistant" and r.dist.shape == (4,)
+    assert "[k1, k2, k3, k4]" in app.results.value
+    with pytest.raises(Exception, match="lens model must be one of"):
+        app.set_model("fisheye")

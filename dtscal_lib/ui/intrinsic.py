@@ -28,6 +28,7 @@ Examples
 from __future__ import annotations
 
 from ..boards import DUCKIETOWN_BOARD, Board
+from ..camera import DIST_MODELS
 from ..coverage import CoverageTracker
 from ..detect import draw_detection
 from ..session import robot_name
@@ -84,6 +85,9 @@ class LiveCalibrator(IntrinsicDriver):
                                                  ("calibration folder", "folder")],
                                         value="ros" if ros else "folder", description="commit to")
         self.robot_text = w.Text(value=self.robot, description="robot")
+        # the lens model of the next CALIBRATE (ROS's calibrator: plumb_bob, rational_polynomial, equidistant)
+        self.model_choice = w.Dropdown(options=list(DIST_MODELS), value=model, description="lens model")
+        self.model_choice.observe(lambda ch: self.set_model(ch["new"]), "value")
         self.folder_text = w.Text(value=str(calibration_dir), description="folder",
                                   layout=lay(width="420px"))
         self.archive_text = w.Text(value=f"{self.robot}_session.zip", description="archive",
@@ -102,7 +106,7 @@ class LiveCalibrator(IntrinsicDriver):
             w.HBox([w.VBox([self.bars, self.count], layout=lay(width="330px")),
                     w.VBox([w.HBox([self.calibrate_button, self.commit_button, self.save_button,
                                     self.reconnect_button]), self.commit_target, self.robot_text,
-                                    self.keep_anyway])]),
+                                    self.model_choice, self.keep_anyway])]),
             w.HTML("<b>samples kept</b> (click a sample's button to drop it)"), self.thumb_box,
             self.folder_text, self.archive_text, self.message,
             w.HTML("<b>results</b>"), self.results,

@@ -180,6 +180,14 @@ class IntrinsicDriver(LoopDriver):
     def _calibrate_ended(self) -> None:
         pass
 
+    def set_model(self, model: str) -> None:
+        """The lens model of the next CALIBRATE (one of :data:`dtscal_lib.camera.DIST_MODELS`)."""
+        from ..camera import DIST_MODELS
+
+        if model not in DIST_MODELS:
+            raise DtscalError(f"lens model must be one of {DIST_MODELS}, got {model!r}")
+        self.model = self.session.model = model
+
     # ------------------------------------------------------------------ the new calibration against the robot's file
     def robot_file(self, folder) -> tuple[calib_files.IntrinsicCalibration, str]:
         """The robot's current intrinsic file: ``folder/camera_intrinsic/<ROBOT>.yaml``, else the folder's
