@@ -159,6 +159,11 @@ TABLE: tuple[Limit, ...] = (
           "between light and dark squares the colours are not trusted and nothing is said",
           "Duckietown's printed pattern (tests/test_ground.py: near-right square dark); the synthetic "
           "session's rectified floor views show +176 to +181 grey levels, their mirror images -176 to -181"),
+    Limit("cross_validation_ratio", 2.0, "half-set difference / predicted 1-sigma (median of the splits)",
+          "verdict 'doubtful' (calibrate-intrinsics --cross-validate)",
+          "two independent calibrations differ by more than 2 sigma of their difference 5 % of the time; a "
+          "median over random splits above it means the stated uncertainty does not describe these views",
+          "mrcal's half-set ratios on data/real/ (issue 25): 0.64-1.36 inside, 0.82-1.72 at the corners"),
 )
 
 #: every limit by name
@@ -183,6 +188,8 @@ RADIAL_FRACTION = LIMITS["radial_fraction"].value
 NEIGHBOUR_CORRELATION = LIMITS["neighbour_correlation"].value
 SYSTEMATIC_RATIO_BAD = LIMITS["systematic_ratio_bad"].value
 MIN_GOOD_VIEWS = LIMITS["min_good_views"].value
+#: ``--cross-validate``'s threshold (:meth:`dtscal_lib.compare.CrossValidation.finding`)
+CROSS_VALIDATION_RATIO = LIMITS["cross_validation_ratio"].value
 
 #: the refusal limits of an intrinsic calibration (:func:`dtscal_lib.plausibility.intrinsic_doubts`)
 INTRINSIC_LIMITS = {
