@@ -23,6 +23,7 @@ import json
 import os
 import sys
 import warnings
+from pathlib import Path
 
 from .errors import CalibrationFileWarning, DtscalError, ImplausibleCalibrationError
 
