@@ -178,7 +178,7 @@ def roster(path, assignment: str | None = None, *, one_student: str | None = Non
         enrol(one_student)
         files = _files(path)
         if not files:
-            r.note(one_student, "no notebook, .py file or hand-in zip handed in")
+            r.note(one_student, "no notebook or .py file handed in (nor a hand-in zip)")
         for p in sorted(files, key=lambda p: (p.suffix == ".zip", str(p))):  # loose notebooks first
             add(one_student, p, p.relative_to(path).as_posix())
     else:
@@ -202,7 +202,7 @@ def roster(path, assignment: str | None = None, *, one_student: str | None = Non
                 files = _files(d)
                 enrol(d.name)
                 if not files:
-                    r.note(d.name, f"{d.name}/: no notebook, .py file or hand-in zip handed in")
+                    r.note(d.name, f"{d.name}/: no notebook or .py file handed in (nor a hand-in zip)")
                 for p in sorted(files, key=lambda p: (p.suffix == ".zip", str(p))):  # loose notebooks first
                     add(d.name, p, p.relative_to(path).as_posix())
             if not r.students:
