@@ -17,7 +17,7 @@ from dtscal_lib.grading.sandbox import Call, CheckRun
 from nbtools import ROOT
 
 CASES = runpy.run_path(str(ROOT / "grading" / "cases.py"))["CHECKS"]
-#: the margin over the largest error of the accepted formulations, as the issue and docs/grading.md state it
+#: the margin over the largest error of the accepted formulations, as issue 22 and the README (Grading) state it
 MARGIN = 1.25
 
 

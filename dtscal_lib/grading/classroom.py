@@ -215,9 +215,13 @@ def roster(path, assignment: str | None = None, *, one_student: str | None = Non
     return r
 
 
+_KEEP: list[Roster] = []
+
+
 def discover(path, assignment: str | None = None) -> tuple[list[Item], list[str]]:
     """The submissions under ``path`` and the notes on everything else (student: note)."""
     r = roster(path, assignment)
+    _KEEP.append(r)  # the members of zips live in the roster's scratch folder: keep it until the process ends
     return r.items, [f"{s}: {n}" for s in r.students for n in r.notes.get(s, [])
                      if " graded as " not in n and not n.endswith("not handed in (0 points)")]
 
@@ -229,7 +233,10 @@ def grade_all(items: list[Item], material: Material, *, jobs: int = 1, progress:
         material.checks(a)  # references once, before the workers start
 
     def one(item: Item) -> GradeResult:
-        return grade_file(item.path, material, item.assignment, student=item.student, **limits)
+        res = grade_file(item.path, material, item.assignment, student=item.student, **limits)
+        if ".zip/" in item.shown:  # a zip's member: named as in the class folder, not by the scratch copy
+            res.submission = item.shown
+        return res
 
     bar = None
     if progress and len(items) > 1:
