@@ -303,3 +303,28 @@ def test_a_persistent_grader_failure_is_reported_as_such_never_as_a_zero(tmp_pat
     page = (out / "report" / "index.html").read_text()
     assert 'id="grader-errors"' in page and "kim" in page.split('id="grader-errors"')[1]
 
+
+
+def test_one_student_takes_loose_notebooks_and_zips_alike(tmp_path):
+    """Gradescope's submission folder (``--one-student``): a notebook uploaded beside the hand-in zip that holds
+    the same notebook is graded once (the loose one), the zip's others are graded, nothing becomes a student."""
+    from dtscal_lib.grading.classroom import roster
+
+    sub = tmp_path / "submission"
+    sub.mkdir()
+    loop = (CORRECT / "01_pinhole_projection__loop.py").read_bytes()
+    (sub / "01_pinhole_projection.py").write_bytes(loop)
+    _zip(sub / "Ada.zip", {"01_pinhole_projection.py": loop, "02_homography.py": b"def apply_homography(H, p):\n"
+                                                                                  b"    return p\n"})
+    r = roster(sub, one_student="submission")
+    try:
+        assert r.students == ["submission"]
+        assert [(i.shown, i.assignment) for i in r.items] == [
+            ("01_pinhole_projection.py", "01_pinhole_projection"), ("Ada.zip/02_homography.py", "02_homography")]
+        assert any("Ada.zip/01_pinhole_projection.py: not graded: 01_pinhole_projection.py is already graded" in n
+                   for n in r.notes["submission"])
+        scratch = r.items[1].path
+        assert scratch.is_file() and not scratch.is_relative_to(sub)  # never unpacked into the submission
+    finally:
+        r.cleanup()
+    assert not scratch.exists()  # and removed afterwards

@@ -3,6 +3,9 @@
 Gradescope unpacks the zip into ``/autograder/source``, runs ``setup.sh`` once when the
 image is built, then ``run_autograder`` for every submission: the student's files are in
 ``/autograder/submission`` and the grades go to ``/autograder/results/results.json``.
+Everything in the submission folder is that one student's (``dtscal grade --one-student``):
+notebooks, ``.py`` files, and the zip ``dtscal handin`` wrote, read as it is with the caps of
+:mod:`.archive` (never unpacked to disk).
 
 The zip holds the kit's library, the hidden cases (``grading/``) and the solution notebooks
 (references). ``setup.sh`` installs the library into a virtual environment and makes
