@@ -208,10 +208,10 @@ def run_own(g: Grading) -> None:
     plan: list[Planned] = []
     for fr in g.graded():
         for i, b in enumerate(g.checks[fr.name]):
-            plan.append(Planned(Job(len(plan), tuple(b.calls), g.limits.wall_s, g.limits.cpu_s), fr, "own",
+            plan.append(Planned(Job(len(plan), list(b.calls), g.limits.wall_s, g.limits.cpu_s), fr, "own",
                                 (Part(i, b),)))
         probe = tuple(diagnosis.probe_args(fr.name))
-        plan.append(Planned(Job(len(plan), tuple((fr.name, a) for a in probe), g.limits.wall_s, g.limits.cpu_s),
+        plan.append(Planned(Job(len(plan), [(fr.name, a) for a in probe], g.limits.wall_s, g.limits.cpu_s),
                             fr, "own", probe=probe))
     _run_and_judge(g, plan)
 
@@ -229,12 +229,12 @@ def run_stand_ins(g: Grading) -> None:
         subst = tuple(substitutes.source(c) for c in g.again[fr.name])
         checks = g.checks[fr.name]
         n = len(checks)
-        plan.append(Planned(Job(len(plan), tuple(c for b in checks for c in b.calls), g.limits.wall_s * n,
-                                g.limits.cpu_s * n, subst), fr, "stand-in",
+        plan.append(Planned(Job(len(plan), [c for b in checks for c in b.calls], g.limits.wall_s * n,
+                                g.limits.cpu_s * n, list(subst)), fr, "stand-in",
                             tuple(Part(i, b) for i, b in enumerate(checks))))
         probe = tuple(diagnosis.probe_args(fr.name))
-        plan.append(Planned(Job(len(plan), tuple((fr.name, a) for a in probe), g.limits.wall_s, g.limits.cpu_s,
-                                subst), fr, "stand-in", probe=probe))
+        plan.append(Planned(Job(len(plan), [(fr.name, a) for a in probe], g.limits.wall_s, g.limits.cpu_s,
+                                list(subst)), fr, "stand-in", probe=probe))
         fr.diagnosis, fr.mistake = "", None  # the diagnosis of this function alone, with the stand-in
     _run_and_judge(g, plan)
 
