@@ -25,7 +25,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 from ..teaching.selfcheck import diagnosis
 from . import substitutes
@@ -112,6 +112,23 @@ class Limits:
     mem_mb: int | None = None
 
 
+class Verdict(NamedTuple):
+    """A check judged on one run: the fraction of its points in [0, 1], and what the student reads."""
+
+    fraction: float
+    message: str
+
+
+@dataclass
+class OwnPoints:
+    """A function's points with the student's own callees (said when the stand-in run counted instead)."""
+
+    value: float = 0.0
+    form: float = 0.0
+    #: a check of value is right on at least one case (form counts only then)
+    right: bool = False
+
+
 @dataclass(frozen=True)
 class Part:
     """A check judged from a job's answers: its index among the function's checks, and the check."""
@@ -151,12 +168,12 @@ class Grading:
     stand_ins: dict[str, list[str]] = field(default_factory=dict)
     #: the functions run again with stand-ins, and for which callees
     again: dict[str, list[str]] = field(default_factory=dict)
-    #: (function, check index) -> {variant: (fraction, message)}
-    judged: dict[tuple[str, int], dict[str, tuple[float, str]]] = field(default_factory=dict)
+    #: (function, check index) -> {variant: verdict}
+    judged: dict[tuple[str, int], dict[str, Verdict]] = field(default_factory=dict)
     #: function -> solving routines its calls reached inside the sandbox
     honesty: dict[str, set] = field(default_factory=dict)
-    #: function -> [value points, form points, a value right] with the student's own callees
-    own_points: dict[str, list] = field(default_factory=dict)
+    #: function -> its points with the student's own callees
+    own_points: dict[str, OwnPoints] = field(default_factory=dict)
 
     def function(self, name: str) -> FunctionResult:
         return next(f for f in self.res.functions if f.name == name)
@@ -220,7 +237,8 @@ def run_stand_ins(g: Grading) -> None:
     """One bug, one charge: a function whose callee lost points runs again with the grader's stand-in
     for the callee (a second, smaller sandbox run, only for those functions); ``score`` keeps the better."""
     lost = {fr.name for fr in g.res.functions if fr.status != "graded" or fr.diagnosis or any(
-        g.judged.get((fr.name, i), {}).get("own", (0.0,))[0] < 1 for i in range(len(g.checks[fr.name])))}
+        g.judged.get((fr.name, i), {}).get("own", Verdict(0.0, "")).fraction < 1
+        for i in range(len(g.checks[fr.name])))}
     g.again = {f: cs for f, cs in g.stand_ins.items() if set(cs) & lost and g.function(f).status == "graded"}
     plan: list[Planned] = []
     for fr in g.graded():
@@ -247,10 +265,13 @@ def score(g: Grading) -> None:
             if (fr.name, i) not in g.judged:
                 continue
             frac, msg = _one_charge(g.judged[(fr.name, i)], b.weight, g.again.get(fr.name, []))
-            own = g.judged[(fr.name, i)].get("own", (0.0,))[0]
-            pts = g.own_points.setdefault(fr.name, [0.0, 0.0, False])  # value points, form points, a value right
-            pts[1 if b.form else 0] += own * b.weight
-            pts[2] |= not b.form and own > 0
+            own = g.judged[(fr.name, i)].get("own", Verdict(0.0, "")).fraction
+            pts = g.own_points.setdefault(fr.name, OwnPoints())
+            if b.form:
+                pts.form += own * b.weight
+            else:
+                pts.value += own * b.weight
+                pts.right |= own > 0
             fr.tests[i] = TestResult(b.name, fr.name, round(frac * b.weight, 4), b.weight, msg)
             value_right[fr.name] = value_right.get(fr.name, False) or (not b.form and frac > 0)
     for fr in g.graded():  # form gives points only to a function that computes something right
@@ -269,8 +290,8 @@ def explain(g: Grading) -> None:
         if fr.name not in g.again:
             g.res.notes.append(f"{fr.name} calls {who}, which passes all its checks: graded with yours.")
             continue
-        value, form, right = g.own_points.get(fr.name, [0.0, 0.0, False])
-        own = value + (form if right else 0.0)
+        pts = g.own_points.get(fr.name, OwnPoints())
+        own = pts.value + (pts.form if pts.right else 0.0)
         changed = f"With your own {who}, {fr.name} would score {own:.4g} / {fr.max_score:g} instead of " \
                   f"{fr.score:g}." if abs(own - fr.score) > 1e-9 else f"Your own {who} gives it the same score."
         g.res.notes.append(f"{fr.name} calls {who}, which lost points: graded with the grader's {who} in place of "
@@ -372,7 +393,7 @@ def _judge(g: Grading, run: SandboxRun, plan: list[Planned]) -> None:
             printed = next((c.stdout for c in one.calls if c.stdout.strip()), "")
             if printed and frac < 1:
                 msg += f"\nprinted: {printed[:300]}" + (" ... (output truncated)" if len(printed) > 300 else "")
-            g.judged.setdefault((fr.name, part.index), {})[p.variant] = (frac, msg)
+            g.judged.setdefault((fr.name, part.index), {})[p.variant] = Verdict(frac, msg)
 
 
 def _names(names) -> str:
@@ -395,23 +416,23 @@ def exercise_callees(sub: Submission, func: str, exercise: tuple[str, ...]) -> l
     return found
 
 
-def _one_charge(results: dict, weight: float, callees: list[str]) -> tuple[float, str]:
+def _one_charge(results: dict[str, Verdict], weight: float, callees: list[str]) -> Verdict:
     """The score of one check of a function that calls other exercise functions: the better of
     the run with the student's own callees and the run with the grader's stand-ins, in words."""
-    own = results.get("own", (0.0, "not run"))
+    own = results.get("own", Verdict(0.0, "not run"))
     if not callees or "stand-in" not in results:
         return own
     stand = results["stand-in"]
     who = _names(callees)
-    if abs(stand[0] - own[0]) < 1e-12:  # the function-level note says how it was graded
+    if abs(stand.fraction - own.fraction) < 1e-12:  # the function-level note says how it was graded
         return stand
-    if stand[0] > own[0]:
-        return stand[0], "\n".join(x for x in (
-            stand[1], f"graded with the grader's {who} in place of yours: with your own {who} this check gets "
-            f"{own[0] * weight:.4g} / {weight:g} (the cause is in {who}, charged there)") if x)
-    return own[0], "\n".join(x for x in (
-        own[1], f"graded with your own {who}: the grader's {who} in its place gives {stand[0] * weight:.4g} / "
-        f"{weight:g} here") if x)
+    if stand.fraction > own.fraction:
+        return Verdict(stand.fraction, "\n".join(x for x in (
+            stand.message, f"graded with the grader's {who} in place of yours: with your own {who} this check gets "
+            f"{own.fraction * weight:.4g} / {weight:g} (the cause is in {who}, charged there)") if x))
+    return Verdict(own.fraction, "\n".join(x for x in (
+        own.message, f"graded with your own {who}: the grader's {who} in its place gives "
+        f"{stand.fraction * weight:.4g} / {weight:g} here") if x))
 
 
 def not_handed_in(assignment: str, material: Material, student: str) -> GradeResult:
