@@ -129,3 +129,31 @@ def test_a_planted_import_of_the_teaching_layer_is_found(tmp_path):
         "camera.py": ["dtscal_lib.teaching.selfcheck.core"],
         "sources/x.py": ["dtscal_lib.teaching", "dtscal_lib.teaching.course"],
     }
+
+
+# Inside the grader (issue 22): no circle at all, imports inside functions included. ``checks`` (the runtime's
+# judges), ``tolerances`` (the offline script deriving the tolerances) and ``material`` once imported each other
+# behind function-level imports; the metrics they share live in ``grading/metrics.py``.
+def _grading_graph(root: Path) -> dict[str, set[str]]:
+    mods = {f"dtscal_lib.grading.{p.stem}": p for p in (root / "grading").glob("*.py") if p.stem != "__init__"}
+    graph = {}
+    for m, p in mods.items():
+        graph[m] = {t for t in _all_imports(p, root) if t in mods and t != m}
+        graph[m] |= {t.rsplit(".", 1)[0] for t in _all_imports(p, root) if t.rsplit(".", 1)[0] in mods} - {m}
+    return graph
+
+
+def test_no_import_circle_in_the_grader_even_inside_functions():
+    graph = _grading_graph(ROOT)
+    assert {"dtscal_lib.grading.checks", "dtscal_lib.grading.metrics", "dtscal_lib.grading.grade"} <= set(graph)
+    assert "dtscal_lib.grading.metrics" in graph["dtscal_lib.grading.checks"]
+    assert _cycle(graph) is None, " -> ".join(_cycle(graph))
+
+
+def test_a_planted_function_level_circle_in_the_grader_is_found(tmp_path):
+    import shutil
+
+    shutil.copytree(ROOT / "grading", tmp_path / "grading")
+    metrics = tmp_path / "grading" / "metrics.py"
+    metrics.write_text(metrics.read_text() + "\n\ndef _late():\n    from .checks import num\n    return num\n")
+    assert _cycle(_grading_graph(tmp_path)) is not None
