@@ -18,6 +18,10 @@ def add_parser(sub) -> None:
     sp.add_argument("--csv", metavar="FILE", help="class summary: one row per student, one column per function")
     sp.add_argument("--report", metavar="DIR", help="write the class report page (score distribution per "
                                                     "function, most frequent mistakes) to DIR/index.html")
+    sp.add_argument("--roster", metavar="CSV|DIR", help="grade students' git repositories: a CSV file "
+                    "(student,repo[,commit]) or a folder of clones; each repository's workspace/ notebooks")
+    sp.add_argument("--deadline", metavar="2026-12-01T23:59", help="with --roster: grade each repository's last "
+                    "commit at or before this time (this machine's zone unless one is given)")
     sp.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (default 1)")
     sp.add_argument("--material", metavar="KIT", help="kit folder with grading/ and solutions/ (default: this kit)")
     sp.add_argument("--gradescope-bundle", metavar="OUT.zip", help="write the Gradescope autograder zip and exit")
@@ -35,24 +39,40 @@ def cmd_grade(args) -> int:
     from .material import Material
     from .report import gradescope, text, write_csv, write_json
 
+    import tempfile
+
     if args.gradescope_bundle:
         from .bundle import write_bundle
 
         out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment)
         print(f"wrote {out}: upload it as the autograder of a Gradescope programming assignment")
         return 0
+    git_notes: dict[str, list[str]] = {}
+    if args.roster or args.deadline:  # git hand-in: clone each repository at its commit into a class folder
+        from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster
+
+        if not args.roster or args.submission:
+            raise DtscalError("--deadline goes with --roster CSV|DIR; --roster replaces the submission argument")
+        deadline = parse_deadline(args.deadline) if args.deadline else None
+        entries = read_roster(args.roster)
+        class_tmp = tempfile.TemporaryDirectory(prefix="dtscal-roster-class-")
+        if deadline is not None and not args.quiet:
+            print(f"grading {len(entries)} repositories at the {deadline_now_note(deadline)}", file=sys.stderr)
+        for co in checkout_roster(entries, class_tmp.name, deadline=deadline):
+            git_notes[co.student] = co.notes
+        args.submission = class_tmp.name
     if not args.submission:
         raise DtscalError("give a submission (notebook, .py file or folder), or --gradescope-bundle OUT.zip")
     if not 1 <= args.jobs <= 64:
         raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
     validate_limits(args.wall, args.cpu, args.mem)
-    import tempfile
-
     from .bundle import unpack_zip_submission
 
     material = Material.load(args.material)
     unpacked = tempfile.TemporaryDirectory(prefix="dtscal-handin-")  # a hand-in zip (`dtscal handin`)
     r = roster(unpack_zip_submission(args.submission, unpacked.name), args.assignment)
+    for student, notes in git_notes.items():  # which commit was graded, or why none: first in the row
+        r.notes[student] = notes + r.notes.get(student, [])
     for student in r.students:  # also in the CSV and JSON, next to the student's grades
         for n in r.notes.get(student, []):
             print(f"{student}: {n}", file=sys.stderr)

@@ -88,8 +88,8 @@ def cmd_handin(args) -> int:
 
     path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
     print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
-    print("hand in this file (upload it to Gradescope, or as your instructor says); with GitHub Classroom, "
-          "commit and push instead: git add workspace && git commit -m 'hand in' && git push")
+    print("hand in this file (upload it to Gradescope, or as your instructor says); if your course collects "
+          "git repositories, commit and push instead: git add workspace && git commit -m 'hand in' && git push")
     return 0
 
 
