@@ -213,7 +213,8 @@ def test_student_on_the_hub_follows_the_nbgitpuller_link_and_runs_notebooks_01_a
 
     url, home = hub["url"], hub["home"]
     link = f"{url}/hub/user-redirect/git-pull?" + urllib.parse.urlencode({
-        "repo": hub["repo"].as_uri(), "branch": "main", "urlpath": "lab/tree/course/01_pinhole_projection.ipynb"})
+        "repo": hub["repo"].as_uri(), "branch": "main", "targetpath": "course",
+        "urlpath": "lab/tree/course/01_pinhole_projection.ipynb"})
     shots = Path(tempfile.mkdtemp(prefix="dtscal-hub-screenshots-"))
     print(f"\nscreenshots: {shots}")
     with sync_playwright() as p:

@@ -82,7 +82,7 @@ def test_cell_source(assignment: str, function: str, *, points: float, cases: di
         "# cell shows the points (partial credit) and why; until then it shows nothing: use the self-checks above.",
         "from dtscal_lib.grading.nbgrader_cell import score as _dtscal_score",
         "_points = None",
-        "# the grader's cases",
+        BEGIN_HIDDEN,
         f"_points = _dtscal_score({assignment!r}, {function!r}, points={points!r},",
         "    cases=" + _literal(cases, "the hidden cases"),
         "    , tolerances=" + _literal(tolerances, "grading/tolerances.json"),
