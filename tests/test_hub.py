@@ -243,6 +243,7 @@ def test_student_on_the_hub_follows_the_nbgitpuller_link_and_runs_notebooks_01_a
             saved = home / "course" / "01_pinhole_projection.ipynb"
             assert "uvw[:, :2] / uvw[:, 2:3]" in saved.read_text()  # the student's code, saved in their home
             assert _errors(saved) == []
+            assert "[x] project_points" in saved.read_text()  # the self-check's verdict, stored with the notebook
 
             _open(page, f"{url}/user/{USER}/lab/tree/course/06_duckiebot_camera.ipynb")
             _run_all_and_save(page)
