@@ -76,7 +76,8 @@ def _hub_env(tmp: Path) -> Path:
     _run(sys.executable, "-m", "venv", "--without-pip", str(env))
     py = env / "bin" / "python"
     site = Path(_run(py, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])").stdout.strip())
-    (site / "_dtscal_test_borrowed.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    borrowed = dict.fromkeys([sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]])
+    (site / "_dtscal_test_borrowed.pth").write_text("".join(f"{p}\n" for p in borrowed))
     # JupyterLab's assets, the widgets' extension, nbgitpuller's server extension: where this environment has them
     (env / "share").mkdir(exist_ok=True)
     (env / "share" / "jupyter").symlink_to(Path(sys.prefix) / "share" / "jupyter")

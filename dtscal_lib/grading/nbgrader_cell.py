@@ -11,6 +11,7 @@ kernel's input history (the cells as nbgrader executed them), test cells left ou
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import tempfile
@@ -52,6 +53,33 @@ def _grade(assignment: str, code: list[str], *, cases: dict, points: float, tole
         return grade_file(path, material, assignment, student="nbgrader")
 
 
+@contextlib.contextmanager
+def _stderr_to_stdout():
+    """nbgrader scores a test cell 0 if it wrote anything on stderr (``determine_grade``): what the grader or
+    the processes it starts say there (a warning, say) is printed on stdout instead, after the grading."""
+    import io
+    import os
+    import sys
+    import warnings
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as spill:
+        os.dup2(spill.fileno(), 2)
+        text = io.StringIO()
+        try:
+            with contextlib.redirect_stderr(text), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            spill.seek(0)
+            said = text.getvalue() + spill.read().decode(errors="replace")
+            if said.strip():
+                print(said.strip()[-2000:])
+
+
 def score(assignment: str, function: str, *, cases: dict, points: float, tolerances: dict, reference: str,
           cells: list[str] | None = None, show: bool = True) -> float:
     """Points of ``function`` (0 .. ``points``) for the code the kernel ran; prints why (stdout)."""
@@ -59,8 +87,9 @@ def score(assignment: str, function: str, *, cases: dict, points: float, toleran
     key = hashlib.sha256(json.dumps([assignment, code, cases, points, tolerances, reference],
                                     sort_keys=True, default=str).encode()).hexdigest()
     if key not in _CACHE:
-        _CACHE[key] = _grade(assignment, code, cases=cases, points=points, tolerances=tolerances,
-                             reference=reference)
+        with _stderr_to_stdout():
+            _CACHE[key] = _grade(assignment, code, cases=cases, points=points, tolerances=tolerances,
+                                 reference=reference)
     res = _CACHE[key]
     fr = next(f for f in res.functions if f.name == function)
     if show:
