@@ -8,7 +8,7 @@ The export writes ``OUT/nbgrader_config.py`` and one assignment per notebook,
   ``### END SOLUTION`` region is nbgrader's own marker, which ``nbgrader generate_assignment`` replaces
   with a stub;
 * every other cell is *read-only* (locked), cells tagged ``solution_only`` are left out;
-* each graded function gets one *autograded test* cell at the end, worth ``POINTS_PER_FUNCTION``. Its
+* each graded function gets one *autograded test* cell at the end, worth the points per function. Its
   hidden part (between ``### BEGIN HIDDEN TESTS`` and ``### END HIDDEN TESTS``, which nbgrader strips
   from the students' copy and restores when it autogrades) carries that notebook's hidden cases
   (``grading/cases.py``), the tolerances (``grading/tolerances.json``) and the reference functions, and
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import ast
 import pprint
-import runpy
 from pathlib import Path
 
 import nbformat
@@ -156,17 +155,19 @@ def source_notebook(nb, assignment: str, *, functions: tuple[str, ...], checks: 
 
 def export(out_dir, repo_root=None) -> list[Path]:
     """Write the nbgrader course into ``out_dir``; the notebooks written."""
-    from ..grading.material import ASSIGNMENTS, find_material
-    from ..grading.tolerances import load as load_tolerances
+    try:
+        from ..grading.material import ASSIGNMENTS, Material
+    except ImportError:  # a student's hand-out has no grader
+        raise DtscalError("the nbgrader export runs in the instructor's kit (it needs grading/ and solutions/); "
+                          "this copy of the kit has no grader") from None
 
-    root = find_material(repo_root)
+    material = Material.load(repo_root)
+    root = material.root
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()) and not (out / "nbgrader_config.py").is_file():
         raise DtscalError(f"{out} exists and is not an nbgrader course written by the kit (no nbgrader_config.py); "
                           "give an empty or new folder")
-    ns = runpy.run_path(str(root / "grading" / "cases.py"))
-    checks, points = ns["CHECKS"], float(ns.get("POINTS_PER_FUNCTION", 10))
-    tolerances = load_tolerances(root)
+    checks, points, tolerances = material.specs, material.points, material.tolerances
     written = []
     for sol in _solution_paths(root / "solutions"):
         nb = _read(sol)
