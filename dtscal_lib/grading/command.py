@@ -39,8 +39,6 @@ def cmd_grade(args) -> int:
     from .material import Material
     from .report import gradescope, text, write_csv, write_json
 
-    import tempfile
-
     if args.gradescope_bundle:
         from .bundle import write_bundle
 
@@ -49,6 +47,8 @@ def cmd_grade(args) -> int:
         return 0
     git_notes: dict[str, list[str]] = {}
     if args.roster or args.deadline:  # git hand-in: clone each repository at its commit into a class folder
+        import tempfile
+
         from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster
 
         if not args.roster or args.submission:
@@ -66,6 +66,8 @@ def cmd_grade(args) -> int:
     if not 1 <= args.jobs <= 64:
         raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
     validate_limits(args.wall, args.cpu, args.mem)
+    import tempfile
+
     from .bundle import unpack_zip_submission
 
     material = Material.load(args.material)
