@@ -22,6 +22,10 @@ def add_parser(sub) -> None:
     sp.add_argument("--one-student", metavar="NAME",
                     help="grade everything under the folder (zips included) as one student's hand-in (what the "
                          "Gradescope bundle does with its submission folder)")
+    sp.add_argument("--roster", metavar="CSV|DIR", help="grade students' git repositories: a CSV file "
+                    "(student,repo[,commit]) or a folder of clones; each repository's workspace/ notebooks")
+    sp.add_argument("--deadline", metavar="2026-12-01T23:59", help="with --roster: grade each repository's last "
+                    "commit at or before this time (this machine's zone unless one is given)")
     sp.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (default 1)")
     sp.add_argument("--material", metavar="KIT", help="kit folder with grading/ and solutions/ (default: this kit)")
     sp.add_argument("--gradescope-bundle", metavar="OUT.zip", help="write the Gradescope autograder zip and exit")
@@ -43,6 +47,22 @@ def cmd_grade(args) -> int:
         out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment)
         print(f"wrote {out}: upload it as the autograder of a Gradescope programming assignment")
         return 0
+    git_notes: dict[str, list[str]] = {}
+    if args.roster or args.deadline:  # git hand-in: clone each repository at its commit into a class folder
+        import tempfile
+
+        from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster
+
+        if not args.roster or args.submission:
+            raise DtscalError("--deadline goes with --roster CSV|DIR; --roster replaces the submission argument")
+        deadline = parse_deadline(args.deadline) if args.deadline else None
+        entries = read_roster(args.roster)
+        class_tmp = tempfile.TemporaryDirectory(prefix="dtscal-roster-class-")  # noqa: F841 (kept until graded)
+        if deadline is not None and not args.quiet:
+            print(f"grading {len(entries)} repositories at the {deadline_now_note(deadline)}", file=sys.stderr)
+        for co in checkout_roster(entries, class_tmp.name, deadline=deadline):
+            git_notes[co.student] = co.notes
+        args.submission = class_tmp.name
     if not args.submission:
         raise DtscalError("give a submission (notebook, .py file or folder), or --gradescope-bundle OUT.zip")
     if not 1 <= args.jobs <= 64:
@@ -50,6 +70,8 @@ def cmd_grade(args) -> int:
     validate_limits(args.wall, args.cpu, args.mem)
     material = Material.load(args.material)
     r = roster(args.submission, args.assignment, one_student=args.one_student)
+    for student, notes in git_notes.items():  # which commit was graded, or why none: first in the row
+        r.notes[student] = notes + r.notes.get(student, [])
     try:
         return _grade_roster(args, r, material)
     finally:

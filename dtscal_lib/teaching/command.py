@@ -19,6 +19,10 @@ def add_parsers(sub) -> None:
         sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ "
                                        "with solutions/")
         release_args(sp)
+        if name == "release":
+            sp.add_argument("--nbgrader", metavar="COURSE", help="write the course as an nbgrader course folder: "
+                            "COURSE/source/<notebook>/<notebook>.ipynb (solution, read-only and autograded test "
+                            "cells; the hidden cases in the tests' hidden part) and COURSE/nbgrader_config.py")
 
     sp = sub.add_parser("course",
                         help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
@@ -41,6 +45,15 @@ def cmd_release(args) -> int:
     from . import release
 
     root = Path(args.repo) if args.repo else repo_root()
+    if getattr(args, "nbgrader", None):
+        from .nbgrader_export import export
+
+        for p in export(args.nbgrader, repo_root=root):
+            print(p)
+        print(f"nbgrader course in {args.nbgrader}: cd there, then `nbgrader generate_assignment 01_pinhole_projection`"
+              " (one assignment per notebook); autograding needs the kit installed where nbgrader runs",
+              file=sys.stderr)
+        return 0
     if args.check:
         diffs = release.check_notebooks(root / "solutions", root / "notebooks")
         if diffs:
@@ -88,8 +101,8 @@ def cmd_handin(args) -> int:
 
     path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
     print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
-    print("hand in this file (upload it to Gradescope, or as your instructor says); with GitHub Classroom, "
-          "commit and push instead: git add workspace && git commit -m 'hand in' && git push")
+    print("hand in this file (upload it to Gradescope, or as your instructor says); if your course collects "
+          "git repositories, commit and push instead: git add workspace && git commit -m 'hand in' && git push")
     return 0
 
 
