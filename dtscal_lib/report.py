@@ -148,7 +148,7 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
         ax.text(x + (10 if x < 1 else -10), y + (22 if y < 1 else -12), "?" if np.isnan(s) else f"{s:.2f} px",
                 ha="left" if x < 1 else "right", color="w", fontsize=9, weight="bold")
     _image_axes(ax, result.image_size)
-    where = "infinity" if not np.isfinite(u.distance) else f"{u.distance:.3g} (board units)"
+    where = "infinity" if not np.isfinite(u.distance) else f"{u.distance:.3g} m"
     corners = ("lens model not invertible there (grey)" if np.isnan(u.corner_mean)
                else f"{u.corner_mean:.2f} px (1 sigma)")
     ax.set_facecolor("0.8")

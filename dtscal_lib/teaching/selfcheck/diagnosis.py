@@ -325,8 +325,9 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
         (_M("denormalization_order", "de-normalization in the wrong order: H_n maps normalized src to normalized "
             "dst, so H = inv(T_dst) @ H_n @ T_src (not inv(T_src) @ H_n @ T_dst)", EQ36),
          lambda s, d: _fit_variant(s, d, "swapped_denorm")),
-        (_M("no_normalization", "no normalization: without Hartley's normalization the DLT fails on "
-            "coordinates in the thousands; centre and scale both point sets first", EQ36),
+        (_M("no_normalization", "no normalization: without Hartley's normalization the DLT's answer depends on "
+            "where the origin is and what unit the points use, and it loses precision far from the origin; centre "
+            "and scale both point sets first", EQ36),
          lambda s, d: _raw_dlt(s, d)),
     ]),
     "intrinsic_constraints": (_constraints, [
