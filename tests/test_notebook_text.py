@@ -174,7 +174,7 @@ def _claims_05(nb) -> None:
     assert "earns its keep" not in prose
     n = _num(r"normalized\s+DLT: error against the true H at the 35 corners: mean ([0-9.]+) mm", text, "normalized")
     u = _num(r"unnormalized DLT: error against the true H at the 35 corners: mean ([0-9.]+) mm", text, "unnorm")
-    assert "an unnormalized DLT\ndoes about as well" in prose and u <= 2 * n + 0.05
+    assert "an unnormalized DLT does about as well" in prose and u <= 2 * n + 0.05
     assert "run **parallel** to the board's rows and columns" in prose
     # errors: about a millimetre even at 0.8 m (the table's last row), a pixel's footprint printed
     assert "the error stays around a\n  millimetre even at 0.8 m" in prose
