@@ -171,14 +171,10 @@ def degenerate_views(constraints: Callable, K, kind: str, n_views: int = 10) -> 
 
 def zhang_constraints(H) -> np.ndarray:
     """The two rows v12 and v11 - v22 of eqs. (12)-(13) for one homography (the notebook's stand-in)."""
+    from ...calibration import _v_row
+
     H = np.asarray(H, dtype=float)
-
-    def v(i: int, j: int) -> np.ndarray:
-        a, b = H[:, i], H[:, j]
-        return np.array([a[0] * b[0], a[0] * b[1] + a[1] * b[0], a[1] * b[1], a[2] * b[0] + a[0] * b[2],
-                         a[2] * b[1] + a[1] * b[2], a[2] * b[2]])
-
-    return np.vstack([v(0, 1), v(0, 0) - v(1, 1)])
+    return np.stack([_v_row(H, 0, 1), _v_row(H, 0, 0) - _v_row(H, 1, 1)])
 
 
 # --------------------------------------------------------------------------------------------- notebook 04
