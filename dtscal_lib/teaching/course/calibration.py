@@ -41,6 +41,7 @@ def show_views(views: IntrinsicViews, board: Board = DUCKIETOWN_BOARD, cols: int
             cv2.drawChessboardCorners(shown, board.pattern_size, c.reshape(-1, 1, 2).astype(np.float32), True)
         ax.imshow(cv2.cvtColor(shown, cv2.COLOR_BGR2RGB))
     fig.suptitle(f"{views.source}: {views.n_views} views used", fontsize=9)
+    fig.alt = ("A few of the recorded frames in which the board was found, the detected corners drawn on each.")
     return fig
 
 
@@ -130,6 +131,8 @@ def plot_board_poses(poses, board: Board = DUCKIETOWN_BOARD,
     ax.set(xlim=(-lim / 2, lim / 2), ylim=(0, lim), zlim=(-lim / 2, lim / 2),
            xlabel="x [m]", ylabel="z (depth) [m]", zlabel="-y (up) [m]", title=title)
     ax.view_init(elev=20, azim=-60)
+    fig.alt = ("The board poses recovered from each view, drawn in 3-D around the camera at the origin "
+               "looking along +z; one rectangle per view.")
     return fig
 
 

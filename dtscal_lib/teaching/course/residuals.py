@@ -59,4 +59,6 @@ def plot_reprojection(residual_sets: dict, views: IntrinsicViews, image_points=N
               angles="xy", scale_units="xy", scale=1, width=0.004, cmap="viridis")
     w, h = views.size
     a2.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title=f"{names[0]}: residuals x{scale:g}")
+    fig.alt = ("Left: each view's RMS reprojection error on a log scale, one marker series per calibration. Right: the "
+               "residual vectors of every corner, magnified, drawn from where each corner was detected.")
     return fig
