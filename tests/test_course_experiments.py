@@ -52,7 +52,9 @@ def test_normalized_dlt_is_invariant_and_the_unnormalized_is_not():
     norm = [r["normalized"] for r in rows]
     raw = [r["unnormalized"] for r in rows]
     assert max(norm) - min(norm) < 1e-6 and max(raw) - min(raw) > 0.01
-    assert 0.2 < norm[0] < 2.0  # 1 px of noise on 35 points: the error against the truth is below a pixel
+    # 1 px of noise per axis on 35 points: the fit's residual against the NOISY points is about
+    # sqrt(2 (1 - 8 / 70)) = 1.33 px RMS, its error against the truth well under that
+    assert 0.2 < norm[0] < 1.1
     table = experiments.invariance_table(rows)
     assert len(re.findall(r"^\s+\d", table, re.MULTILINE)) == 3
 
