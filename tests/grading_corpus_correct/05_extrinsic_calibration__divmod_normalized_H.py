@@ -1,6 +1,7 @@
 # Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: divmod_normalized_H
-# formulation: divmod; H / H[2, 2] written out; camera_height_pitch: lambda = 1 / |K^-1 h1|, nearest rotation by SVD, pitch asin(-R[2, 2])
+# formulation: divmod; H / H[2, 2] written out
+# formulation (camera_height_pitch): lambda = 1 / |K^-1 h1|, nearest rotation by SVD, pitch asin(-R[2, 2])
 
 import numpy as np
 

@@ -1,6 +1,7 @@
 # Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: indices_rows
-# formulation: np.indices; rows @ H.T; camera_height_pitch: lambda from the mean of both columns, r3 = r1 x r2 as is, optical axis atan2
+# formulation: np.indices; rows @ H.T
+# formulation (camera_height_pitch): lambda from the mean of both columns, r3 = r1 x r2 as is, optical axis atan2
 
 import numpy as np
 

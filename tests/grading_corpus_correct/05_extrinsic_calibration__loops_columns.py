@@ -1,6 +1,7 @@
 # Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: loops_columns
-# formulation: two loops; H @ columns; camera_height_pitch: geometric mean of the two column norms, the centre from solving R C = -t
+# formulation: two loops; H @ columns
+# formulation (camera_height_pitch): geometric mean of the two column norms, the centre from solving R C = -t
 
 import numpy as np
 

@@ -1,6 +1,7 @@
 # Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: meshgrid_rows
-# formulation: meshgrid; rows @ H.T; camera_height_pitch: normalized separately: r1 and r2 each divided by its own norm
+# formulation: meshgrid; rows @ H.T
+# formulation (camera_height_pitch): normalized separately: r1 and r2 each divided by its own norm
 
 import numpy as np
 

@@ -1,6 +1,7 @@
 # Correct implementation, written differently, for tests/test_grading_fairness.py: must get full marks.
 # variant: repeat_tile_einsum
-# formulation: np.repeat and np.tile; einsum; camera_height_pitch: H / H[2, 2] first, camera centre as the null vector of K [r1 r2 r3 t]
+# formulation: np.repeat and np.tile; einsum
+# formulation (camera_height_pitch): H / H[2, 2] first, camera centre as the null vector of K [r1 r2 r3 t]
 
 import numpy as np
 
