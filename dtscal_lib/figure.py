@@ -145,9 +145,13 @@ def show_image(ax, image: np.ndarray, title: str = "") -> None:
 
 
 def show_images(images: Sequence[np.ndarray], titles: Sequence[str], width: float = 4.2) -> CourseFigure:
-    """Images (BGR or grey) side by side, titled."""
-    fig = new_figure(width * len(images), width * 0.78, dpi=PHOTO_DPI)
-    axes = fig.subplots(1, len(images), squeeze=False)[0]
+    """Images (BGR or grey) side by side, titled (``width`` inches each; more than three go in two rows)."""
+    cols = len(images) if len(images) <= 3 else -(-len(images) // 2)  # more than three: two legible rows
+    rows = -(-len(images) // cols)
+    fig = new_figure(width * cols, width * 0.78 * rows, dpi=PHOTO_DPI)
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax in axes[len(images):]:
+        ax.remove()
     for ax, im, title in zip(axes, images, titles):
         show_image(ax, im, title)
     fig.alt = (f"{len(images)} camera image{'s' if len(images) > 1 else ''} side by side; "
