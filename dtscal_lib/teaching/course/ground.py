@@ -70,11 +70,15 @@ def show_ground_result(rectified: np.ndarray, H: np.ndarray, corners: np.ndarray
     grid = draw_ground_grid(rectified, H, spacing=0.05, x_range=x_range, y_range=y_range)
     if corners is not None:
         for k, (u, v) in enumerate(np.asarray(corners)):
-            cv2.circle(grid, (int(round(u)), int(round(v))), 3, (0, 0, 255) if k == 0 else (255, 0, 0), -1)
+            if k == 0:  # corner 0: a larger square, not only another colour
+                cv2.rectangle(grid, (int(round(u)) - 5, int(round(v)) - 5), (int(round(u)) + 5, int(round(v)) + 5),
+                              (0, 94, 213), -1)
+            else:
+                cv2.circle(grid, (int(round(u)), int(round(v))), 3, (178, 114, 0), -1)
     bird = birdseye_view(rectified, H, x_range=x_range, y_range=y_range, px_per_m=800)
     fig = new_figure(9.5, 3.8, dpi=PHOTO_DPI)
     a1, a2 = fig.subplots(1, 2, width_ratios=[1.35, 1])
-    show_image(a1, grid, "rectified frame + 5 cm ground grid (corner 0 in red)")
+    show_image(a1, grid, "rectified frame + 5 cm ground grid (corner 0: the square)")
     bgr = bird if bird.ndim == 3 else cv2.cvtColor(bird, cv2.COLOR_GRAY2BGR)
     a2.imshow(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), extent=(y_range[1], y_range[0], x_range[0], x_range[1]))
     a2.set(xlabel="y (left) [m]", ylabel="x (forward) [m]")

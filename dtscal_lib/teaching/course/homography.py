@@ -11,7 +11,7 @@ from ...boards import DUCKIETOWN_BOARD, Board
 from ...duckietown import IMAGE_SIZE
 from ...homography import apply_homography, transfer_rms
 from .fallback import Fallback
-from .figure import ARROW_COLOR, TRUTH_COLOR, CourseFigure, draw_board, image_axes, new_figure
+from .figure import ARROW_COLOR, BOARD_COLOR, OTHER_COLOR, TRUTH_COLOR, CourseFigure, draw_board, image_axes, new_figure
 
 __all__ = ["fronto_parallel_view", "warp_figure", "unnormalized_dlt", "conditioning_experiment",
            "conditioning_summary", "conditioning_figure", "residual_figure"]
@@ -137,9 +137,11 @@ def conditioning_figure(results: dict, title: str = "noise-free points") -> Cour
     fig = new_figure(4.8, 3.0)
     ax = fig.add_subplot()
     off = np.maximum(results["offset"], 1.0)
-    ax.loglog(off, np.maximum(results["unnormalized"], 1e-16), "o-", label="DLT without normalization")
-    ax.loglog(off, np.maximum(results["normalized"], 1e-16), "s-", label=results["label"])
-    ax.loglog(off, np.maximum(results["opencv"], 1e-16), "^--", label="cv2.findHomography", alpha=0.7)
+    ax.loglog(off, np.maximum(results["unnormalized"], 1e-16), "o-", color=BOARD_COLOR,
+              label="DLT without normalization")
+    ax.loglog(off, np.maximum(results["normalized"], 1e-16), "s-", label=results["label"], color=TRUTH_COLOR)
+    ax.loglog(off, np.maximum(results["opencv"], 1e-16), "^--", color=OTHER_COLOR,
+              label="cv2.findHomography", alpha=0.7)
     ax.set_xlabel("offset of the source coordinates (px)")
     ax.set_ylabel("RMS transfer error (px)")
     ax.set_title(title, fontsize=9)
