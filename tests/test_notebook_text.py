@@ -186,6 +186,11 @@ def _claims_05(nb) -> None:
     far = _num(r"at 0.5 m ahead one rectified pixel row spans ([0-9.]+) mm", text, "footprint")
     assert far > 3 * near
     assert "beyond about half a metre is correspondingly rough" not in prose
+    # lane markings: nearly parallel through the rectified frame, splayed through the raw one
+    assert "the two lines agree within a few\ndegrees" in prose and "splay them by tens of degrees" in prose
+    rect = _num(r"rectified frame: .* they differ by ([0-9.]+) deg", text, "lane angle (rectified)")
+    raw = _num(r"raw frame \(wrong: not rectified\): .* they differ by ([0-9.]+) deg", text, "lane angle (raw)")
+    assert rect < 6.0 and raw > 20.0
     # height and pitch: recovered = built, Duckietown's default near 10 cm; the yaw's cost as the why says
     h = _num(r"this robot \(your H\):\s+camera ([0-9.]+) cm", text, "height")
     p = _num(r"this robot \(your H\):.* cm above the ground, ([0-9.]+) deg", text, "pitch")

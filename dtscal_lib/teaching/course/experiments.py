@@ -30,7 +30,8 @@ from .projection import look_at_pose
 
 __all__ = ["span_at_yaw", "invariance_experiment", "invariance_table", "dlt_column_range", "off_plane_experiment",
            "degenerate_views", "zhang_constraints", "field_of_view", "corner_shift_px", "fixed_point_converged",
-           "line_bend_px", "lens_explorer", "camera_height_pitch", "pixel_footprint_mm", "yaw_cost_mm"]
+           "line_bend_px", "lens_explorer", "camera_height_pitch", "pixel_footprint_mm", "yaw_cost_mm",
+           "lane_markings_on_ground"]
 
 
 # --------------------------------------------------------------------------------------------- notebook 01
@@ -341,3 +342,35 @@ def yaw_cost_mm(yaw_deg: float, x_ahead: float) -> float:
     yaw about the robot's origin, so a point ``x`` ahead lands ``x sin(yaw)`` to the side.
     """
     return 1000.0 * x_ahead * math.sin(math.radians(yaw_deg))
+
+
+def lane_markings_on_ground(image, H_ground, *, v_min: int = 250, x_max: float = 0.6) -> dict:
+    """The lane markings of a frame (yellow centre line on the left, white line on the right) mapped to the
+    ground with ``H_ground``; each fitted by a straight line ``y = a + b x``.
+
+    Marking pixels are picked by colour (HSV: yellow hue 15-40 saturated and bright; white unsaturated and
+    bright) below image row ``v_min`` (the road, not the wall), and kept only off the calibration sheet
+    (|y| > 0.16 m, on their side of the robot) and within ``x_max`` metres ahead. Returns, per marking,
+    ``n`` (points), ``angle_deg`` (direction against the robot's x axis, left positive), ``offset_m``
+    (y at x = 0) and ``x_range``. Parallel markings have equal angles: a right calibration maps the road's
+    parallel lines to parallel lines.
+    """
+    import cv2
+
+    from ...ground import pixel_to_ground
+
+    hsv = cv2.cvtColor(np.asarray(image), cv2.COLOR_BGR2HSV)
+    hue, sat, val = hsv[..., 0], hsv[..., 1], hsv[..., 2]
+    vv, uu = np.mgrid[0:hsv.shape[0], 0:hsv.shape[1]]
+    out = {}
+    for name, mask, side in (("yellow", (hue > 15) & (hue < 40) & (sat > 120) & (val > 120), 1.0),
+                             ("white", (sat < 40) & (val > 170), -1.0)):
+        sel = mask & (vv > v_min)
+        g = pixel_to_ground(H_ground, np.column_stack([uu[sel], vv[sel]]).astype(float))
+        g = g[(side * g[:, 1] > 0.16) & (g[:, 0] > 0) & (g[:, 0] < x_max)]
+        if len(g) < 10:
+            continue
+        b, a = np.polyfit(g[:, 0], g[:, 1], 1)
+        out[name] = {"n": int(len(g)), "angle_deg": float(np.degrees(np.arctan(b))), "offset_m": float(a),
+                     "x_range": (float(g[:, 0].min()), float(g[:, 0].max()))}
+    return out
