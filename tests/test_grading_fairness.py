@@ -303,6 +303,8 @@ PINNED = {
     "02_homography__estimate_denormalization_order": 10, "03_intrinsic_calibration__K_principal_point_fx": 15,
     "04_distortion_rectification__distort_pixel_offsets": 14,
     "04_distortion_rectification__maps_float64_transposed": 10, "05_extrinsic_calibration__from_far_row": 0,
+    "05_extrinsic_calibration__camera_H_not_inverted": 0, "05_extrinsic_calibration__camera_height_sign": 0,
+    "05_extrinsic_calibration__camera_pitch_radians": 0, "05_extrinsic_calibration__camera_pitch_sign": 0,
 }
 
 

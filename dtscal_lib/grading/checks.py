@@ -164,6 +164,19 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             k = np.arange(cols * rows)
             truth.append(np.column_stack([x0 + (k // cols) * sq, y0 + (k % cols) * sq]))
         return [tuple(b) for b in boards], truth
+    if func == "camera_height_pitch":  # robot cameras placed by hand: the height and pitch are the truth
+        from ..teaching.selfcheck.diagnosis import robot_ground_homography
+
+        K = dt.default_P()[:, :3] if p.get("camera", "rectified") == "rectified" else CAMERAS[p["camera"]]
+        args, truth = [], []
+        for _ in range(views):
+            height, pitch = rng.uniform(0.05, 0.3), rng.uniform(5.0, 50.0)
+            H = robot_ground_homography(K, height, pitch, yaw_deg=rng.uniform(-4.0, 4.0), x=rng.uniform(0.0, 0.1))
+            if p.get("random_scale"):
+                H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.01, 100.0)
+            args.append((H, K.copy()))
+            truth.append(np.array([height, pitch]))
+        return args, truth
     raise MaterialError(f"no exercise function named {func}")
 
 
@@ -520,6 +533,9 @@ def about(func: str, spec: dict) -> str:
         words.append("the minimal 3 views")
     if spec.get("n") == 4 and func == "estimate_homography":
         words.append("the minimal 4 correspondences")
+    if func == "camera_height_pitch":
+        words.append("robot cameras at other heights and pitches: return [height in metres, pitch in degrees "
+                     "below the horizon]")
     if func == "board_ground_points":
         words.append("ground points of boards of other sizes and places: near-right corner first, "
                      "leftwards along the near row, then row by row away")

@@ -24,7 +24,7 @@ ASSIGNMENTS: dict[str, tuple[str, ...]] = {
     "03_intrinsic_calibration": ("intrinsic_constraints", "intrinsics_from_homographies",
                                  "extrinsics_from_homography"),
     "04_distortion_rectification": ("distort_normalized", "undistort_normalized", "rectification_maps"),
-    "05_extrinsic_calibration": ("board_ground_points", "pixel_to_ground"),
+    "05_extrinsic_calibration": ("board_ground_points", "pixel_to_ground", "camera_height_pitch"),
 }
 
 

@@ -63,6 +63,8 @@ def plot_distortion_field(distort: Callable, K, dist, size=dt.IMAGE_SIZE, step: 
     ax.plot(K[0, 2], K[1, 2], "b+", ms=12, label="principal point")
     ax.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title="lens distortion: pinhole pixel -> recorded pixel")
     ax.legend(loc="lower right", fontsize=7)
+    fig.alt = ("Arrows over the image from where a pinhole camera would see a point to where the lens puts it; "
+               "the colour gives the displacement in pixels: nothing moves at the centre, many pixels at the corners.")
     return fig
 
 
@@ -103,6 +105,8 @@ def plot_undistortion_error(undistort: Callable, K, dist, size=dt.IMAGE_SIZE, st
         ax.set_title(f"{name}: worst {text}", fontsize=9)
         ax.axis("off")
     fig.colorbar(im, ax=axes, label="round-trip error [px]")
+    fig.alt = ("Maps of the round-trip error (pixels, log colour scale) of undistorting then distorting every pixel: "
+               "the notebook's undistortion on the left, OpenCV's default undistortPoints on the right.")
     return fig
 
 

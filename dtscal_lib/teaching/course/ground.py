@@ -7,7 +7,7 @@ import numpy as np
 
 from ...boards import DUCKIETOWN_BOARD, Board
 from ...ground import birdseye_view, draw_ground_grid, ground_to_pixel, pixel_to_ground
-from .figure import PHOTO_DPI, CourseFigure, new_figure, show_image
+from .figure import PHOTO_DPI, TRUTH_COLOR, CourseFigure, new_figure, show_image
 
 __all__ = ["plot_ground_layout", "ground_error_mm", "ground_error_report", "show_ground_result"]
 
@@ -19,7 +19,7 @@ def plot_ground_layout(ground: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> C
     g = np.asarray(ground, float)
     fig = new_figure(4.2, 4.2)
     ax = fig.add_subplot()
-    ax.plot(g[:, 1], g[:, 0], "o", ms=4, color="tab:blue")
+    ax.plot(g[:, 1], g[:, 0], "o", ms=4, color=TRUTH_COLOR)
     for k in (0, 1, board.cols):
         ax.annotate(str(k), (g[k, 1], g[k, 0]), textcoords="offset points", xytext=(4, 4), fontsize=8)
     ax.add_patch(Rectangle((-0.05, -0.04), 0.1, 0.08, fill=False, lw=1.2))
@@ -29,6 +29,8 @@ def plot_ground_layout(ground: np.ndarray, board: Board = DUCKIETOWN_BOARD) -> C
     ax.text(0.08, 0.0, "y", va="center")
     ax.set(xlim=(0.2, -0.2), ylim=(-0.06, max(0.4, g[:, 0].max() + 0.05)), aspect="equal",
            xlabel="y (left) [m]", ylabel="x (forward) [m]", title="robot frame, from above")
+    fig.alt = ("Top view of the ground in the robot frame (x forward up the page, y to the left): the board's inner "
+               "corners as dots in front of the robot, and the robot's x and y axes as arrows.")
     return fig
 
 
@@ -68,13 +70,19 @@ def show_ground_result(rectified: np.ndarray, H: np.ndarray, corners: np.ndarray
     grid = draw_ground_grid(rectified, H, spacing=0.05, x_range=x_range, y_range=y_range)
     if corners is not None:
         for k, (u, v) in enumerate(np.asarray(corners)):
-            cv2.circle(grid, (int(round(u)), int(round(v))), 3, (0, 0, 255) if k == 0 else (255, 0, 0), -1)
+            if k == 0:  # corner 0: a larger square, not only another colour
+                cv2.rectangle(grid, (int(round(u)) - 5, int(round(v)) - 5), (int(round(u)) + 5, int(round(v)) + 5),
+                              (0, 94, 213), -1)
+            else:
+                cv2.circle(grid, (int(round(u)), int(round(v))), 3, (178, 114, 0), -1)
     bird = birdseye_view(rectified, H, x_range=x_range, y_range=y_range, px_per_m=800)
     fig = new_figure(9.5, 3.8, dpi=PHOTO_DPI)
     a1, a2 = fig.subplots(1, 2, width_ratios=[1.35, 1])
-    show_image(a1, grid, "rectified frame + 5 cm ground grid (corner 0 in red)")
+    show_image(a1, grid, "rectified frame + 5 cm ground grid (corner 0: the square)")
     bgr = bird if bird.ndim == 3 else cv2.cvtColor(bird, cv2.COLOR_GRAY2BGR)
     a2.imshow(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), extent=(y_range[1], y_range[0], x_range[0], x_range[1]))
     a2.set(xlabel="y (left) [m]", ylabel="x (forward) [m]")
     a2.set_title("bird's-eye view", fontsize=9)
+    fig.alt = ("Left: the rectified frame with a 5 cm ground grid drawn back through the homography and the board's "
+               "corners as dots. Right: the bird's-eye view, the rectified image warped onto the ground.")
     return fig

@@ -11,7 +11,7 @@ from ...boards import DUCKIETOWN_BOARD, Board
 from ...duckietown import IMAGE_SIZE
 from ...homography import apply_homography, transfer_rms
 from .fallback import Fallback
-from .figure import TRUTH_COLOR, CourseFigure, draw_board, image_axes, new_figure
+from .figure import ARROW_COLOR, BOARD_COLOR, OTHER_COLOR, TRUTH_COLOR, CourseFigure, draw_board, image_axes, new_figure
 
 __all__ = ["fronto_parallel_view", "warp_figure", "unnormalized_dlt", "conditioning_experiment",
            "conditioning_summary", "conditioning_figure", "residual_figure"]
@@ -48,6 +48,8 @@ def warp_figure(image: np.ndarray, corners: np.ndarray, warped: np.ndarray, boar
     ideal = (board.object_points()[:, :2] / board.square + m) * s
     draw_board(b, ideal, board, color=TRUTH_COLOR)
     image_axes(b, (warped.shape[1], warped.shape[0]), "warped with inv(H): fronto-parallel")
+    fig.alt = ("Left: the recorded camera frame with the detected board corners drawn as a grid. Right: the same frame "
+               "warped with the inverse homography so the board looks straight on, with the ideal square grid on top.")
     return fig
 
 
@@ -135,14 +137,18 @@ def conditioning_figure(results: dict, title: str = "noise-free points") -> Cour
     fig = new_figure(4.8, 3.0)
     ax = fig.add_subplot()
     off = np.maximum(results["offset"], 1.0)
-    ax.loglog(off, np.maximum(results["unnormalized"], 1e-16), "o-", label="DLT without normalization")
-    ax.loglog(off, np.maximum(results["normalized"], 1e-16), "s-", label=results["label"])
-    ax.loglog(off, np.maximum(results["opencv"], 1e-16), "^--", label="cv2.findHomography", alpha=0.7)
+    ax.loglog(off, np.maximum(results["unnormalized"], 1e-16), "o-", color=BOARD_COLOR,
+              label="DLT without normalization")
+    ax.loglog(off, np.maximum(results["normalized"], 1e-16), "s-", label=results["label"], color=TRUTH_COLOR)
+    ax.loglog(off, np.maximum(results["opencv"], 1e-16), "^--", color=OTHER_COLOR,
+              label="cv2.findHomography", alpha=0.7)
     ax.set_xlabel("offset of the source coordinates (px)")
     ax.set_ylabel("RMS transfer error (px)")
     ax.set_title(title, fontsize=9)
     ax.grid(True, which="major", alpha=0.3)
     ax.legend(fontsize=7)
+    fig.alt = ("Log-log plot of the RMS transfer error (pixels) of each homography fit against how far the points "
+               "lie from the origin; one line per method.")
     return fig
 
 
@@ -156,6 +162,9 @@ def residual_figure(src: np.ndarray, dst: np.ndarray, fits: dict[str, np.ndarray
         rms = float(np.sqrt(np.mean(np.sum(r ** 2, axis=1))))
         ax.plot(dst[:, 0], dst[:, 1], ".", color="k", ms=3)
         ax.quiver(dst[:, 0], dst[:, 1], r[:, 0], r[:, 1], angles="xy", scale_units="xy", scale=1 / scale,
-                  color="tab:red", width=0.004)
+                  color=ARROW_COLOR, width=0.004)
         image_axes(ax, size, f"{name}: RMS {rms:.3f} px (arrows x{scale:g})")
+    fig.alt = (f"Residual arrows of {len(fits)} homography fits on the detected corners, one panel per fit, "
+               f"each arrow from a corner to where the fit puts it, magnified {scale:g} times; "
+               "the RMS is in each title.")
     return fig

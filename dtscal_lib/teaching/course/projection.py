@@ -62,14 +62,20 @@ def projection_figure(project: Callable, K: np.ndarray, poses: Sequence[tuple], 
     titles : one per pose
     """
     Ks = [cam.as_K(k) for k in K] if np.ndim(K) == 3 else [cam.as_K(K)] * len(poses)
-    fig = new_figure(2.3 * len(poses), 2.1)
-    axes = fig.subplots(1, len(poses), squeeze=False)[0]
+    cols = min(3, len(poses))  # legible panels: at most three side by side
+    rows = -(-len(poses) // cols)
+    fig = new_figure(3.0 * cols, 2.45 * rows)
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax in axes[len(poses):]:
+        ax.remove()
     X = board.object_points()
     for ax, (R, t), k, title in zip(axes, poses, Ks, titles):
         uv = np.asarray(project(k, R, t, X), dtype=float)
         image_axes(ax, size, title)
         draw_board(ax, uv, board)
         ax.plot(k[0, 2], k[1, 2], "+", color="k", ms=8)
+    fig.alt = (f"The Duckietown board as the camera sees it, one image per panel ({len(poses)}): its 35 inner corners "
+               "joined into rows and columns, corner 0 marked by a black square, the principal point by a cross.")
     return fig
 
 

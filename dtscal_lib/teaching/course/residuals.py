@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ... import camera as cam
-from .figure import CourseFigure, new_figure
+from .figure import BOARD_COLOR, OTHER_COLOR, TRUTH_COLOR, CourseFigure, new_figure
 from .session import IntrinsicViews
 
 __all__ = ["reprojection_residuals", "rms", "plot_reprojection"]
@@ -49,7 +49,9 @@ def plot_reprojection(residual_sets: dict, views: IntrinsicViews, image_points=N
     width = 0.8 / len(names)
     for k, name in enumerate(names):
         per_view, total = rms(residual_sets[name])
-        a1.bar(np.arange(len(per_view)) + k * width, per_view, width, label=f"{name} (all views: {total:.2f} px)")
+        a1.bar(np.arange(len(per_view)) + k * width, per_view, width, label=f"{name} (all views: {total:.2f} px)",
+               color=(BOARD_COLOR, TRUTH_COLOR, OTHER_COLOR)[k % 3], hatch=("", "//", "..")[k % 3],
+               edgecolor="k", linewidth=0.3)  # told apart by pattern as well as colour
     a1.set(xlabel="view", ylabel="RMS reprojection error [px]", yscale="log", title="per-view error")
     a1.legend(fontsize=7)
     pts = views.image_points if image_points is None else image_points
@@ -59,4 +61,6 @@ def plot_reprojection(residual_sets: dict, views: IntrinsicViews, image_points=N
               angles="xy", scale_units="xy", scale=1, width=0.004, cmap="viridis")
     w, h = views.size
     a2.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title=f"{names[0]}: residuals x{scale:g}")
+    fig.alt = ("Left: each view's RMS reprojection error on a log scale, one bar per calibration (plain, hatched). "
+               "Right: the residual vectors of every corner, magnified, drawn from where each corner was detected.")
     return fig

@@ -48,4 +48,5 @@ from .distortion import (  # noqa: E402
     check_undistort_normalized,
     opencv_distort,
 )
-from .ground import check_board_ground_points, check_pixel_to_ground  # noqa: E402
+from .ground import check_board_ground_points, check_camera_height_pitch, check_pixel_to_ground  # noqa: E402
+from .predict import Prediction, predict_choice, predict_number, predict_points  # noqa: E402

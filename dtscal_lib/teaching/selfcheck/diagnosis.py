@@ -140,7 +140,23 @@ def _probes(func: str) -> tuple:
         return ((K, d, new_camera_matrix(K, d, (320, 200), 0.6), (320, 200)),)
     if func == "board_ground_points":
         return ((4, 3, 0.05, 0.3, -0.2), (3, 6, 0.02, 0.1, 0.05))
+    if func == "camera_height_pitch":
+        K = dt.default_P()[:, :3]
+        return ((robot_ground_homography(K, 0.104, 18.0, yaw_deg=0.8) * 3.0, K),
+                (robot_ground_homography(K, 0.15, 31.0, yaw_deg=-2.0, x=0.03) * -0.5, K))
     raise KeyError(func)
+
+
+def robot_ground_homography(K, height: float, pitch_deg: float, *, yaw_deg: float = 0.0, x: float = 0.06):
+    """The ground homography (rectified pixel -> ground metres) of a camera ``height`` metres above the ground,
+    ``x`` ahead of the axle, pitched down by ``pitch_deg`` and turned left by ``yaw_deg``, built by hand."""
+    p, y = np.radians(pitch_deg), np.radians(yaw_deg)
+    ahead = np.array([np.cos(p) * np.cos(y), np.cos(p) * np.sin(y), -np.sin(p)])
+    right = np.array([np.sin(y), -np.cos(y), 0.0])
+    R = np.vstack([right, np.cross(ahead, right), ahead])  # ground (x fwd, y left, z up) -> camera
+    t = -R @ np.array([x, 0.0, height])
+    H = np.linalg.inv(np.asarray(K, float) @ np.column_stack([R[:, 0], R[:, 1], t]))
+    return H / H[2, 2]
 
 
 def _PROBE_POSE():
@@ -325,8 +341,9 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
         (_M("denormalization_order", "de-normalization in the wrong order: H_n maps normalized src to normalized "
             "dst, so H = inv(T_dst) @ H_n @ T_src (not inv(T_src) @ H_n @ T_dst)", EQ36),
          lambda s, d: _fit_variant(s, d, "swapped_denorm")),
-        (_M("no_normalization", "no normalization: without Hartley's normalization the DLT fails on "
-            "coordinates in the thousands; centre and scale both point sets first", EQ36),
+        (_M("no_normalization", "no normalization: without Hartley's normalization the DLT's answer depends on "
+            "where the origin is and what unit the points use, and it loses precision far from the origin; centre "
+            "and scale both point sets first", EQ36),
          lambda s, d: _raw_dlt(s, d)),
     ]),
     "intrinsic_constraints": (_constraints, [
@@ -396,6 +413,54 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
          lambda c, r, sq, x0, y0: _ground(c, r, sq, x0, y0 + sq)),
     ]),
 }
+def _height_pitch(H, K) -> np.ndarray:
+    from ...ground import camera_pose_from_homography
+
+    pose = camera_pose_from_homography(np.asarray(H, float), np.asarray(K, float))
+    return np.array([pose["height_m"], pose["pitch_down_deg"]])
+
+
+EQ_GROUND = "eq. (5)-(6) with the ground as the plane"
+MISTAKES["camera_height_pitch"] = (_height_pitch, [
+    (_M("height_sign", "the height has the wrong sign: the camera centre is C = -R^T t in the robot frame, whose z "
+        "axis points up, so a camera above the ground has C_z > 0", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [-1.0, 1.0]),
+    (_M("pitch_radians", "the pitch is in radians: return degrees (math.degrees)", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [1.0, np.pi / 180.0]),
+    (_M("pitch_sign", "the pitch has the wrong sign: it is how far the optical axis points BELOW the horizon, "
+        "asin(-R[2, 2]) (positive for a camera looking down at the road)", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [1.0, -1.0]),
+    (_M("H_not_inverted", "H used where its inverse belongs: H maps pixels to the ground, so it is H^-1 = "
+        "lambda K [r1 r2 t] (K^-1 H^-1, not K^-1 H)", EQ_GROUND),
+     lambda H, K: _height_pitch_of(np.linalg.solve(np.asarray(K, float), np.asarray(H, float)), first=True)),
+    (_M("height_from_t", "the height read from t: t is the robot's origin seen from the camera; the camera centre "
+        "in the robot frame is C = -R^T t", EQ_GROUND),
+     lambda H, K: _height_pitch_t(H, K)),
+])
+
+
+def _rt_of(M: np.ndarray, first: bool = False):
+    """[r1 r2 t] of M = lambda [r1 r2 t] (lambda from the first column, or the mean of both), R made orthonormal.
+    Applied to a matrix that is not of that form (a mistake model), the two choices differ: the usual one, the
+    first column (the self-check's hint), is the one modelled."""
+    lam = 1.0 / np.linalg.norm(M[:, 0]) if first else 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
+    if (0.3 * r1 + t)[2] < 0:
+        r1, r2, t = -r1, -r2, -t
+    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    return U @ Wt, t
+
+
+def _height_pitch_of(M: np.ndarray, first: bool = False) -> np.ndarray:
+    R, t = _rt_of(M, first)
+    return np.array([float((-R.T @ t)[2]), float(np.degrees(np.arcsin(np.clip(-R[2, 2], -1, 1))))])
+
+
+def _height_pitch_t(H, K) -> np.ndarray:
+    R, t = _rt_of(np.linalg.solve(np.asarray(K, float), np.linalg.inv(np.asarray(H, float))))
+    return np.array([float(-t[2]), float(np.degrees(np.arcsin(np.clip(-R[2, 2], -1, 1))))])
+
+
 FUNCTIONS = tuple(MISTAKES)
 
 

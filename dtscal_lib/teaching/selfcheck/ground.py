@@ -16,7 +16,7 @@ import numpy as np
 from ... import duckietown as dt
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, nums, run_check
 
-__all__ = ["check_board_ground_points", "check_pixel_to_ground"]
+__all__ = ["check_board_ground_points", "check_pixel_to_ground", "check_camera_height_pitch"]
 
 
 # --------------------------------------------------------------------------- board_ground_points
@@ -100,4 +100,32 @@ def check_pixel_to_ground(fn: Callable) -> Report:
         _case_default_sanity(),
         _case_vs_opencv(71, 1.0, "a perturbed homography on 25 pixels (vs OpenCV)"),
         _case_vs_opencv(72, -250.0, "the same H multiplied by -250 gives the same ground points"),
+    ])
+
+
+# --------------------------------------------------------------------------- camera_height_pitch
+def _case_robot(height, pitch, yaw, x, scale, title, hint) -> Case:
+    def run(fn):
+        from .diagnosis import robot_ground_homography  # a camera placed by hand: the truth by construction
+
+        K = dt.default_P()[:, :3]
+        H = robot_ground_homography(K, height, pitch, yaw_deg=yaw, x=x) * scale
+        got = expect_shape(fn(H.copy(), K.copy()), (2,), "camera_height_pitch(H, K)")
+        expect_close(got[:1], [height], 1e-6, "height (metres above the ground)")
+        expect_close(got[1:], [pitch], 1e-5, "pitch (degrees below the horizon)")
+
+    return Case(title, run, hint=hint)
+
+
+def check_camera_height_pitch(fn: Callable) -> Report:
+    """Check ``camera_height_pitch(H, K) -> array([height_m, pitch_deg])`` on cameras placed by hand."""
+    return run_check("camera_height_pitch", fn, [
+        _case_robot(0.104, 18.0, 0.8, 0.062, 1.0, "a Duckiebot camera 10.4 cm up, pitched 18 deg down", hint=(
+            "M = K^-1 H^-1 = lambda [r1 r2 t]; lambda = 1 / |M[:, 0]|; R = [r1 r2 r1 x r2]; C = -R^T t; "
+            "height = C[2], pitch = degrees(asin(-R[2, 2]))")),
+        _case_robot(0.2, 40.0, -3.0, 0.0, -7.5, "a higher, steeper camera; H times -7.5 (any scale and sign)", hint=(
+            "H is defined up to scale and sign: fix lambda's sign so that a ground point ahead of the robot, "
+            "e.g. (0.3, 0), is in front of the camera (positive depth)")),
+        _case_robot(0.06, 8.0, 0.0, 0.1, 1.0, "a low camera looking almost straight ahead", hint=(
+            "return np.array([height_in_metres, pitch_in_degrees]) (float64, shape (2,))")),
     ])
