@@ -106,8 +106,9 @@ def test_every_student_has_a_row_and_no_one_is_dropped(klass):
     assert {csv_cell(s) for s in students} == set(klass["zrows"])  # the CSV escapes, see below
     assert set(klass["zjson"]["students"]) == students
     assert "README.txt" in " ".join(klass["zjson"]["not_graded"])  # a stray file is named, not dropped
-    assert {r["max"] for r in klass["zrows"].values()} == {"120"}  # notebooks 01-05 for everyone: 1 + 2 + 3 + 3 + 3 functions (05: board_ground_points,
-    # pixel_to_ground, camera_height_pitch), 10 points each
+    # notebooks 01-05 for everyone: 1 + 2 + 3 + 3 + 3 functions, 10 points each (05: board_ground_points,
+    # pixel_to_ground, camera_height_pitch)
+    assert {r["max"] for r in klass["zrows"].values()} == {"120"}
 
 
 def test_each_student_gets_exactly_their_unpacked_notebooks_grades(klass):
