@@ -97,6 +97,11 @@ TABLE: tuple[Limit, ...] = (
           "a single corner's residual length beyond this is not noise (Gaussian: exp(-18), 1.5e-8 per corner)",
           "OpenCV's real photographs: the longest clean residual is 3.85 (left) and 3.72 (right) robust sigma; "
           "one corner moved by 2 px stands at 16.7 / 15.6 (benchmarks/bench_verdict.py)"),
+    Limit("outlier_corner_min_px", 1.0, "px", "verdict (quality): outlier corners",
+          "and at least this long: a corner off by less is not worth a word when ROS's calibrator calls an RMS "
+          "under 0.5 px good (max_rms); a rendered session's tails reach 0.61 px at 19 robust sigma",
+          "OpenCV's real photographs: 2 px moved -> 1.91-1.98 px residual (found); the recorded session's "
+          "longest residual 0.61 px (not named)"),
     Limit("outlier_corner_max_share", 0.01, "of the corners", "verdict (quality): outlier corners",
           "more far-off corners than this at once are a pattern (a bent column, a wrong view), named by the "
           "other rules, not single outliers", "chosen, not measured: 7 of the 702 corners of a real set"),
@@ -211,6 +216,7 @@ UNEXPLAINED_RATIO_DOUBTFUL = LIMITS["unexplained_ratio_doubtful"].value
 UNEXPLAINED_RATIO_BAD = LIMITS["unexplained_ratio_bad"].value
 OUTLIER_CORNER_Z = LIMITS["outlier_corner_z"].value
 OUTLIER_CORNER_MAX_SHARE = LIMITS["outlier_corner_max_share"].value
+OUTLIER_CORNER_MIN_PX = LIMITS["outlier_corner_min_px"].value
 
 #: the refusal limits of an intrinsic calibration (:func:`dtscal_lib.plausibility.intrinsic_doubts`)
 INTRINSIC_LIMITS = {

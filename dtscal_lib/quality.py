@@ -86,6 +86,7 @@ from .limits import (  # noqa: E402
     RADIAL_Z,
     LENS_SHARE,
     OUTLIER_CORNER_MAX_SHARE,
+    OUTLIER_CORNER_MIN_PX,
     OUTLIER_CORNER_Z,
     SYSTEMATIC_RATIO_BAD,
     TILT_BAD_DEG,
@@ -710,7 +711,8 @@ def _outlier_corners(result, obj_list, img_list, res):
     """Single corners far off where the camera puts them: found, named, left out, the calibration repeated.
 
     A corner is an outlier when its residual (a 2-D vector) is longer than :data:`OUTLIER_CORNER_Z` robust
-    standard deviations of the residual coordinates (``1.4826 * median |e|``). Returns ``(finding, refit)``
+    standard deviations of the residual coordinates (``1.4826 * median |e|``) and than
+    :data:`OUTLIER_CORNER_MIN_PX`. Returns ``(finding, refit)``
     or ``(None, None)``; more than :data:`OUTLIER_CORNER_MAX_SHARE` of the corners at once is not a few bad
     corners but a pattern (the other rules say which).
     """
@@ -718,8 +720,9 @@ def _outlier_corners(result, obj_list, img_list, res):
     scale = 1.4826 * float(np.median(np.abs(e)))
     if not scale > 0:
         return None, None
+    limit = max(OUTLIER_CORNER_Z * scale, OUTLIER_CORNER_MIN_PX)
     hits = [(v, int(i), float(np.linalg.norm(r[i]))) for v, r in enumerate(res)
-            for i in np.flatnonzero(np.linalg.norm(r, axis=1) > OUTLIER_CORNER_Z * scale)]
+            for i in np.flatnonzero(np.linalg.norm(r, axis=1) > limit)]
     if not hits or len(hits) > max(1, OUTLIER_CORNER_MAX_SHARE * len(e)):
         return None, None
     keep = [np.ones(len(o), dtype=bool) for o in obj_list]
@@ -738,7 +741,8 @@ def _outlier_corners(result, obj_list, img_list, res):
     return Finding(
         "outlier_corners", "doubtful",
         f"{len(hits)} corner(s) lie far from where the camera puts them ({'; '.join(names)}{more}; the limit is "
-        f"{OUTLIER_CORNER_Z:g} x {scale:.3f} px, the residuals' robust sigma). Calibrated again without "
+        f"{limit:.2f} px: {OUTLIER_CORNER_Z:g} x {scale:.3f} px, the residuals' robust sigma, and at least "
+        f"{OUTLIER_CORNER_MIN_PX:g} px). Calibrated again without "
         f"{'it' if len(hits) == 1 else 'them'}: RMS {result.rms:.3f} -> {fit.rms:.3f} px, fx {df:+.2f} px",
         "use the calibration without these corners (shown above) or re-detect those views: a corner the "
         "detector put on clutter, a reflection or the board's edge", sorted({v for v, _, _ in hits})), fit
