@@ -817,7 +817,8 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     if radial is not None:
         radial.advice = f"{_richer_model(result, noise, richer_fits)}; {radial.advice}"
         findings.append(radial)
-    corner_finding, without_corners = _outlier_corners(result, obj, img, res)
+    lens_blamed = any(f.code == "fit" for f in fit_findings)  # then far-off corners are the lens's echo
+    corner_finding, without_corners = (None, None) if lens_blamed else _outlier_corners(result, obj, img, res)
     if corner_finding is not None:
         findings.append(corner_finding)
     rho = _neighbour_correlation(obj, res)
