@@ -35,7 +35,7 @@ when it changes nothing.
 ...        for r in poses]
 >>> res = calibrate([obj] * 5, img, (640, 480))
 >>> w = fit_richer(res, "warp")
->>> [round(1000 * x, 2) for x in w.warp]
+>>> [float(round(1000 * x, 2)) + 0.0 for x in w.warp]
 [2.0, 0.0]
 """
 
@@ -45,6 +45,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from .covariance import rodrigues
 
 __all__ = ["RicherFit", "fit_richer", "candidates", "excess_share"]
 
@@ -104,6 +106,9 @@ class _Fit:
         self.obj = [np.asarray(o, dtype=np.float64)[:, :2] for o in result.object_points]
         self.img = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in result.image_points]
         self.shape = [4.0 * g * (1.0 - g) for g in _grid_shape(self.obj)]  # (N_i, 2): dx, dy
+        self.view_of = np.repeat(np.arange(len(self.obj)), [len(o) for o in self.obj])
+        self.xy, self.uv = np.concatenate(self.obj), np.concatenate(self.img)
+        self.shape_all = np.concatenate(self.shape)
         self.skew = bool(result.skew)
         self.warp = name == "warp"
         self.dnames = _dist_names(result, name)
@@ -128,70 +133,71 @@ class _Fit:
         w = theta[k:k + 2] if self.warp else np.zeros(2)
         return fx, fy, cx, cy, s, d8, w
 
-    def view(self, theta, pose, v, jacobian=True):
+    def project(self, theta, poses, jacobian=True):
+        """Residuals (2N,) of every view at once; with the Jacobian, its intrinsic part (2N, n) and pose part
+        (2N, 6) (one ``cv2.projectPoints`` call for all points, in the camera frame)."""
         fx, fy, cx, cy, s, d8, w = self.unpack(theta)
-        P = np.column_stack([self.obj[v], self.shape[v] @ w])
+        R, dR = rodrigues(poses[:, :3], jacobian=jacobian)
+        Rv = R[self.view_of]
+        Pb = np.column_stack([self.xy, self.shape_all @ w])
+        Pc = np.einsum("nij,nj->ni", Rv, Pb) + poses[self.view_of, 3:]
         K0 = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-        q, J = cv2.projectPoints(P.reshape(-1, 1, 3), pose[:3], pose[3:], K0, d8)
+        q, J = cv2.projectPoints(Pc.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K0, d8)
         q = q.reshape(-1, 2).copy()
         ydn = (q[:, 1] - cy) / fy
         q[:, 0] += s * ydn
-        r = (q - self.img[v]).ravel()
+        r = (q - self.uv).ravel()
         if not jacobian:
             return r, None, None
         J = J.reshape(-1, 2, J.shape[1])
+        dP = J[:, :, 3:6]  # d pixel / d camera-frame point (= d / d t at t = 0)
         cols = [J[:, :, 6], J[:, :, 7], J[:, :, 8], J[:, :, 9]]
         if self.skew:
             cols.append(np.column_stack([ydn, np.zeros_like(ydn)]))
         cols += [J[:, :, 10 + i] for i in self.didx]
-        Je = J[:, :, :6].copy()
         if self.warp:
-            R = cv2.Rodrigues(pose[:3])[0]
-            dz = J[:, :, 3:6] @ R[:, 2]  # d pixel / d (board z)
-            cols += [dz * self.shape[v][:, 0:1], dz * self.shape[v][:, 1:2]]
+            dz = np.einsum("nci,ni->nc", dP, Rv[:, :, 2])  # d pixel / d (board z)
+            cols += [dz * self.shape_all[:, 0:1], dz * self.shape_all[:, 1:2]]
         Ji = np.stack(cols, axis=2)  # (N, 2, n)
+        dRv = dR[self.view_of]  # (N, 3 k, 3, 3)
+        Je = np.concatenate([np.einsum("nci,nkij,nj->nck", dP, dRv, Pb), dP], axis=2)  # (N, 2, 6)
         if self.skew:  # q_x += s * (q_y - cy) / fy: every term but fx, fy, cx, cy, s moves q_y
-            k0 = 5
-            Ji[:, 0, k0:] += (s / fy) * Ji[:, 1, k0:]
+            Ji[:, 0, 5:] += (s / fy) * Ji[:, 1, 5:]
             Je[:, 0, :] += (s / fy) * Je[:, 1, :]
         return r, Ji.reshape(-1, Ji.shape[2]), Je.reshape(-1, 6)
 
     def cost(self, theta, poses) -> float:
-        return float(sum((self.view(theta, poses[v], v, jacobian=False)[0] ** 2).sum() for v in range(len(self.obj))))
+        return float((self.project(theta, poses, jacobian=False)[0] ** 2).sum())
 
-    def solve(self, max_iter: int = 30):
+    def solve(self, max_iter: int = 12):
         theta, poses = self.theta.copy(), self.poses.copy()
         lam = 1e-3
         cost = self.cost(theta, poses)
+        rows = np.repeat(self.view_of, 2)
+        starts = np.searchsorted(rows, np.arange(len(self.obj)))
         for _ in range(max_iter):
-            n = len(theta)
-            A = np.zeros((n, n))
-            gi = np.zeros(n)
-            Bs, Cs, gv = [], [], []
-            for v in range(len(self.obj)):
-                r, Ji, Je = self.view(theta, poses[v], v)
-                A += Ji.T @ Ji
-                gi += Ji.T @ r
-                Bs.append(Ji.T @ Je)
-                Cs.append(Je.T @ Je)
-                gv.append(Je.T @ r)
-            improved = False
-            for _ in range(10):
-                Ad = A + lam * np.diag(np.diag(A))
-                Cd = [C + lam * np.diag(np.diag(C)) for C in Cs]
-                Ci = [np.linalg.inv(C) for C in Cd]
-                S = Ad - sum(B @ c @ B.T for B, c in zip(Bs, Ci))
-                rhs = -gi + sum(B @ c @ g for B, c, g in zip(Bs, Ci, gv))
+            r, Ji, Je = self.project(theta, poses)
+            A, gi = Ji.T @ Ji, Ji.T @ r
+            Bs = np.add.reduceat(Ji[:, :, None] * Je[:, None, :], starts, axis=0)  # (V, n, 6)
+            Cs = np.add.reduceat(Je[:, :, None] * Je[:, None, :], starts, axis=0)  # (V, 6, 6)
+            gv = np.add.reduceat(Je * r[:, None], starts, axis=0)  # (V, 6)
+            improved = done = False
+            for _ in range(8):
+                Cd = Cs + lam * np.einsum("vii->vi", Cs)[:, :, None] * np.eye(6)
+                Ci = np.linalg.inv(Cd)
+                BC = Bs @ Ci  # (V, n, 6)
+                S = A + lam * np.diag(np.diag(A)) - np.einsum("vij,vkj->ik", BC, Bs)
+                rhs = -gi + np.einsum("vij,vj->i", BC, gv)
                 try:
                     di = np.linalg.solve(S, rhs)
                 except np.linalg.LinAlgError:
                     lam *= 10
                     continue
-                dp = np.array([-c @ (g + B.T @ di) for B, c, g in zip(Bs, Ci, gv)])
+                dp = -np.einsum("vij,vj->vi", Ci, gv + np.einsum("vij,i->vj", Bs, di))
                 t2, p2 = theta + di, poses + dp
                 c2 = self.cost(t2, p2)
                 if np.isfinite(c2) and c2 < cost:
-                    done = cost - c2 < 1e-10 * cost
+                    done = cost - c2 < 1e-7 * cost
                     theta, poses, cost, improved = t2, p2, c2, True
                     lam = max(lam / 10, 1e-9)
                     break
