@@ -611,8 +611,7 @@ def _richer_model(result, noise: float, fits: dict | None) -> str:
     lens = {k: f for k, f in fits.items() if k != "warp"}
     name, share = _best_lens(result, noise, lens)
     if name is not None and share >= LENS_SHARE:
-        return (f"use a richer lens model: {_LENS_ADVICE[name]} explains {100 * share:.0f} % of the residual above "
-                "the noise")
+        return f"{_LENS_ADVICE[name]}: fitted, it explains {100 * share:.0f} % of the residual above the noise"
     tried = ", ".join(_LENS_WORDS[k] for k in lens)
     return (f"not the lens model: {tried} fitted to these corners explain{'s' if len(lens) == 1 else ''} only "
             f"{100 * max(share, 0.0):.0f} % of the residual above the noise")
@@ -620,10 +619,10 @@ def _richer_model(result, noise: float, fits: dict | None) -> str:
 
 #: the lens candidates in words (the finding's message) and as advice
 _LENS_WORDS = {"k3": "k3", "rational": "OpenCV's 8-coefficient rational model", "tangential": "tangential terms"}
-_LENS_ADVICE = {"k3": "estimating k3 (dtscal_lib.calibration.calibrate(..., fix_k3=False); ROS keeps k3 = 0)",
-                "rational": "OpenCV's 8-coefficient rational model (not in ROS's camera_info: use a lens with less "
-                            "distortion or crop to the well-modelled centre)",
-                "tangential": "--model plumb_bob (tangential terms)"}
+_LENS_ADVICE = {"k3": "estimate k3 as well (dtscal_lib.calibration.calibrate(..., fix_k3=False); ROS keeps k3 = 0)",
+                "rational": "use a richer lens model, OpenCV's 8-coefficient rational (not in ROS's camera_info: use "
+                            "a lens with less distortion or keep to the well-modelled centre)",
+                "tangential": "use --model plumb_bob (radial2 has no tangential terms)"}
 
 
 def _richer_fits(result) -> dict:
@@ -677,7 +676,7 @@ def _fit_findings(result, noise: float):
             "fit", "bad" if ratio > FIT_RATIO_BAD else "doubtful",
             f"{head}; {_LENS_WORDS[name]} brings sigma to {f.sigma:.3f} px ({100 * share:.0f} % of the residual "
             f"above the noise): the {result.model} model does not follow this lens",
-            f"use a richer lens model: {_LENS_ADVICE[name]}"))
+            _LENS_ADVICE[name]))
         return findings, notes, fits
     warp_words = ""
     if warp is not None:

@@ -177,16 +177,18 @@ def test_live_tool_and_command_line_give_the_same_verdict_for_the_same_samples(r
 
     side, res = real
     obj, img = list(res.object_points), list(res.image_points)
-    cli_result, cli_dropped = calibrate_without_outlier_views(obj, img, res.image_size, model=res.model)
+    skew = side == "right"  # the live solver is told the skew choice too
+    cli_result, cli_dropped = calibrate_without_outlier_views(obj, img, res.image_size, model=res.model, skew=skew)
     cli = assess_quality(cli_result)
     solver = SolverProcess()
     try:
         assert solver.ready(wait=60)
-        live_result, live_dropped = solver.calibrate(obj, img, res.image_size, res.model)
+        live_result, live_dropped = solver.calibrate(obj, img, res.image_size, res.model, skew=skew)
         live = solver.assess(live_result)
     finally:
         solver.close()
     assert list(live_dropped) == list(cli_dropped)
     np.testing.assert_allclose(live_result.K, cli_result.K, rtol=1e-9)
+    assert live_result.skew == cli_result.skew == skew
     assert live.verdict == cli.verdict and [f.code for f in live.findings] == [f.code for f in cli.findings]
     assert live.uncertainty.corner_mean == pytest.approx(cli.uncertainty.corner_mean, rel=1e-9)
