@@ -81,7 +81,7 @@ TABLE: tuple[Limit, ...] = (
     Limit("lens_share", 0.25, "of the residual variance above the noise", "verdict (quality): blame the lens model",
           "a finer lens model fitted to the same corners must explain a quarter of (sigma^2 - noise^2) before the "
           "lens is blamed; likewise mrcal's board warp before the board is",
-          "OpenCV's real photographs (benchmarks/bench_verdict.py): rational 1.0 % (left) / 1.7 % (right), k3 "
+          "OpenCV's real photographs (benchmarks/bench_verdict.py): rational 1.0 % (left) / 1.4 % (right), k3 "
           "0.0 / 1.3 %, board warp 13.5 % / 17.7 %; a lens with k3 = 0.08-0.4 fitted without k3: k3 explains "
           "100 %"),
     Limit("unexplained_ratio_doubtful", 4.0, "residual sigma / corner noise",

@@ -686,7 +686,8 @@ def _fit_findings(result, noise: float):
                       f"({100 * wshare:.0f} % of the excess)")
     lens_words = (f"{' and '.join(_LENS_WORDS[k] for k in lens)} explain at most {100 * share:.0f} %" if lens
                   else "no finer lens model could be fitted")
-    if warp is not None and wshare >= LENS_SHARE:
+    # with fewer views than min_good_views the two warp terms trade off against the few poses
+    if warp is not None and wshare >= LENS_SHARE and result.n_views >= MIN_GOOD_VIEWS:
         findings.append(Finding(
             "board_warp", "bad" if ratio > UNEXPLAINED_RATIO_BAD else "doubtful",
             f"{head}; the board is not flat: {warp_words}; {lens_words} of the excess",
@@ -811,13 +812,20 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
 
     line_findings = _offset_findings(result, obj, img, res, noise)
     findings += line_findings
+    if line_findings:  # a bent column or row is the cause of the residual: the fit rule only echoes it
+        for f in findings:
+            if f.code == "unexplained_fit":
+                f.severity, f.advice = "good", ""
+                notes.append(f)
+        findings = [f for f in findings if f.code != "unexplained_fit"]
     # a bad column or row also shows as radial and correlated residuals: report the cause, not its echoes
     radial = None if line_findings else _radial_finding(result, res, noise)
     if radial is not None:
         radial.advice = f"{_richer_model(result, noise, richer_fits)}; {radial.advice}"
         findings.append(radial)
     lens_blamed = any(f.code == "fit" for f in fit_findings)  # then far-off corners are the lens's echo
-    corner_finding, without_corners = (None, None) if lens_blamed else _outlier_corners(result, obj, img, res)
+    corner_finding, without_corners = ((None, None) if lens_blamed or line_findings
+                                       else _outlier_corners(result, obj, img, res))
     if corner_finding is not None:
         findings.append(corner_finding)
     rho = _neighbour_correlation(obj, res)
