@@ -234,6 +234,10 @@ class Quality:
                 "worst_region": u.worst_region(),
             },
             "more_data_where": self.help_region,
+            "notes": [n.to_dict() for n in self.notes],
+            "richer_models": None if self.richer is None else {
+                k: {"sigma_px": float(f.sigma), "rms_px": float(f.rms), "dist_terms": list(f.dist_names),
+                    "warp_mm": [float(1000.0 * w) for w in f.warp]} for k, f in self.richer.items()},
             "consequences": self.consequences,
             "meaning": self.meaning(),
         }
