@@ -100,19 +100,23 @@ TABLE: tuple[Limit, ...] = (
           "one corner moved by 2 px stands at 16.7 / 15.6 (benchmarks/bench_verdict.py)"),
     Limit("outlier_corner_min_px", 1.0, "px", "verdict (quality): outlier corners",
           "and at least this long: a corner off by less is not worth a word when ROS's calibrator calls an RMS "
-          "under 0.5 px good (max_rms); a rendered session's tails reach 0.61 px at 19 robust sigma",
-          "OpenCV's real photographs: 2 px moved -> 1.91-1.98 px residual (found); the recorded session's "
-          "longest residual 0.61 px (not named)"),
+          "under 0.5 px good (max_rms): twice that, for one corner, is a wrong detection",
+          "OpenCV's real photographs: the longest clean residual 0.46 / 0.45 px, 2 px moved -> 1.91-1.98 px "
+          "residual (found); a check: the recorded session's longest residual, 0.61 px at 19 robust sigma, "
+          "is not named"),
     Limit("outlier_corner_max_share", 0.01, "of the corners", "verdict (quality): outlier corners",
           "more far-off corners than this at once are a pattern (a bent column, a wrong view), named by the "
           "other rules, not single outliers", "chosen, not measured: 7 of the 702 corners of a real set"),
     Limit("corner_sigma_doubtful", 1.0, "px, mean 1-sigma at the image corners", "verdict 'doubtful' (quality)",
           "the image corners are extrapolated (no board corner is detected there): a pixel of doubt there "
           "moves the ground projection of the lane's far edge",
-          "shipped session 0.44 px (good); data/real/ 2.09 px with the honest sigma (doubtful)"),
+          "the noise model's figure, as mrcal's (1.03x mrcal 2.2's on the same corners): OpenCV's real "
+          "photographs left 1.61 px (doubtful: no board near the bottom-left corner), right 0.51 px (good); "
+          "a check: the recorded session 0.43 px (72 views)"),
     Limit("corner_sigma_bad", 4.0, "px, mean 1-sigma at the image corners", "verdict 'bad' (quality)",
           "four pixels at the corners is a calibration the data does not support",
-          "chosen, not measured: above every set measured (data/real/ 2.09 px)"),
+          "above every real set measured (left 1.61 px); eight synthetic views all in the middle of the image "
+          "reach more (a check, not a source: tests/test_verdict_real.py)"),
     Limit("view_outlier_factor", 3.0, "view RMS / median view RMS", "verdict (quality): the view is named",
           "one view fitting far worse than the others is a wrong detection or a moved board",
           "chosen, not measured: as the kit's outlier-view rejection of the pipeline"),
