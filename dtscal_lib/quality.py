@@ -894,8 +894,8 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
         except (np.linalg.LinAlgError, DtscalError):
             cons = None
     if cons is not None:
-        for n in notes:  # what the residual the model does not explain costs on the ground
-            n.message += _ground_cost(result, noise, cons)
+        for n in notes + [f for f in findings if f.code in ("fit", "board_warp", "unexplained_fit")]:
+            n.message += _ground_cost(result, noise, cons)  # what the residual above the noise costs on the ground
     return Quality(verdict, findings, float(noise), n_noise, float(result.sigma), pv, res, umap, counts,
                    help_region, spread, consequences=cons, notes=notes, without_outlier_corners=without_corners,
                    richer=richer_fits)
