@@ -825,7 +825,13 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     # a bad column or row also shows as radial and correlated residuals: report the cause, not its echoes
     radial = None if line_findings else _radial_finding(result, res, noise)
     if radial is not None:
-        radial.advice = f"{_richer_model(result, noise, richer_fits)}; {radial.advice}"
+        lens_words = _richer_model(result, noise, richer_fits)
+        radial.advice = f"{lens_words}; {radial.advice}"
+        if lens_words.startswith("not the lens model"):  # the finer models were fitted and do not remove it
+            radial.message = radial.message.replace(
+                f"a radial pattern the {result.model} distortion model cannot absorb",
+                "a radial pattern that finer lens models fitted to the same corners do not remove (the print or "
+                "the detector)")
         findings.append(radial)
     lens_blamed = any(f.code == "fit" for f in fit_findings)  # then far-off corners are the lens's echo
     corner_finding, without_corners = ((None, None) if lens_blamed or line_findings
