@@ -72,7 +72,7 @@ TABLE: tuple[Limit, ...] = (
           "above it the residual is more than the corner noise measured without a model: the finer lens models "
           "(k3, OpenCV's rational) and mrcal's board warp are fitted to find what explains it",
           "OpenCV's real photographs data/real/ left 2.04, right 1.73 (benchmarks/bench_verdict.py): both are "
-          "tested; Zhang's published corners 3.2 with his model (issue 21)"),
+          "tested; Zhang's published corners 3.13 with his model (benchmarks/bench_zhang.py)"),
     Limit("fit_ratio_bad", 3.0, "residual sigma / corner noise", "verdict 'bad' when a richer lens model explains it",
           "a lens model that leaves three times the noise, when a finer one is shown to explain the residual",
           "synthetic 16 views fitted without k3: k3 = 0.08 gives 1.6x, 0.25 3.4x, 0.4 5.9x, k3 explaining 100 % "
@@ -89,7 +89,8 @@ TABLE: tuple[Limit, ...] = (
           "the print and the detector leave a residual above the noise on every real set; beyond this it is "
           "more than any clean real set shows",
           "OpenCV's real photographs 1.73-2.04 (and 1.5-2.5 on every subset, issue 21); Zhang's published "
-          "corners 3.2 (issue 21): all below, so none is doubtful for this"),
+          "corners 3.13 (benchmarks/bench_zhang.py; tangential and rational terms explain 1.5-1.6 % of it): all "
+          "below, so none is doubtful for this"),
     Limit("unexplained_ratio_bad", 8.0, "residual sigma / corner noise", "verdict 'bad' (quality)",
           "twice the doubtful limit: a residual the model, the lens and the board cannot explain",
           "chosen, not measured: twice unexplained_ratio_doubtful"),
