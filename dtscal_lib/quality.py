@@ -62,6 +62,7 @@ from .errors import CalibrationError, DtscalError
 from .findings import Finding
 
 __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "residuals", "grid_indices",
+           "leave_out_outlier_corners", "corner_severity",
            "projection_uncertainty", "image_region", "consequences", "explain", "REGION_NAMES"]
 
 #: no detector measures corners of an 8-bit image much better than this (pixels, per coordinate);
@@ -723,23 +724,25 @@ def _outlier_corners(result, obj_list, img_list, res):
     e = np.concatenate(res)
     scale = 1.4826 * float(np.median(np.abs(e)))
     if not scale > 0:
-        return None, None
+        return None, None, []
     limit = max(OUTLIER_CORNER_Z * scale, OUTLIER_CORNER_MIN_PX)
     hits = [(v, int(i), float(np.linalg.norm(r[i]))) for v, r in enumerate(res)
             for i in np.flatnonzero(np.linalg.norm(r, axis=1) > limit)]
     if not hits or len(hits) > max(1, OUTLIER_CORNER_MAX_SHARE * len(e)):
-        return None, None
+        return None, None, []
     keep = [np.ones(len(o), dtype=bool) for o in obj_list]
     for v, i, _ in hits:
         keep[v][i] = False
     try:
         fit = result.refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
     except (DtscalError, cv2.error, np.linalg.LinAlgError):
-        return None, None
-    names = []
-    for v, i, size in hits[:6]:
+        return None, None, []
+    left = []
+    for v, i, size in hits:
         c, r = grid_indices(obj_list[v])[i]
-        names.append(f"view {v} corner {i} (column {c}, row {r}): {size:.2f} px, {size / scale:.0f} sigma")
+        left.append({"view": int(v), "corner": int(i), "column": int(c), "row": int(r), "residual_px": float(size),
+                     "robust_sigmas": float(size / scale)})
+    names = [_corner_words(h) for h in left[:6]]
     more = f" ... ({len(hits)} in all)" if len(hits) > 6 else ""
     df = fit.K[0, 0] - result.K[0, 0]
     return Finding(
@@ -749,7 +752,35 @@ def _outlier_corners(result, obj_list, img_list, res):
         f"{OUTLIER_CORNER_MIN_PX:g} px). Calibrated again without "
         f"{'it' if len(hits) == 1 else 'them'}: RMS {result.rms:.3f} -> {fit.rms:.3f} px, fx {df:+.2f} px",
         "use the calibration without these corners (shown above) or re-detect those views: a corner the "
-        "detector put on clutter, a reflection or the board's edge", sorted({v for v, _, _ in hits})), fit
+        "detector put on clutter, a reflection or the board's edge", sorted({v for v, _, _ in hits})), fit, left
+
+
+def _corner_words(h: dict) -> str:
+    return (f"view {h['view']} corner {h['corner']} (column {h['column']}, row {h['row']}): {h['residual_px']:.2f} px, "
+            f"{h['robust_sigmas']:.0f} sigma")
+
+
+def leave_out_outlier_corners(result):
+    """``result`` calibrated again without its outlier corners (``left_out_corners`` names them), or ``result``.
+
+    What ``dtscal calibrate-intrinsics`` and the live CALIBRATE do after dropping outlier views
+    (:func:`dtscal_lib.session.calibrate_without_outlier_views`). Nothing is left out when the far-off corners
+    are the echo of something else: a column or row offset in many views (:func:`_offset_findings`) or a lens the
+    model cannot follow (a finer lens model, fitted, explains the residual: :func:`_fit_findings`).
+    """
+    obj = [np.asarray(o, float)[:, :2] for o in result.object_points]
+    img = [np.asarray(p, float).reshape(-1, 2) for p in result.image_points]
+    res = residuals(result)
+    finding, fit, left = _outlier_corners(result, obj, img, res)
+    if fit is None:
+        return result
+    noise_raw, _ = corner_noise(obj, img)
+    noise = max(noise_raw, NOISE_FLOOR_PX) if np.isfinite(noise_raw) else max(result.sigma, NOISE_FLOOR_PX)
+    if (any(f.code == "fit" for f in _fit_findings(result, noise)[0])
+            or _offset_findings(result, obj, img, res, noise)):
+        return result
+    fit.left_out_corners = list(result.left_out_corners) + left
+    return fit
 
 
 def _neighbour_correlation(obj_list, res) -> float:
@@ -834,8 +865,17 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
                 "the detector)")
         findings.append(radial)
     lens_blamed = any(f.code == "fit" for f in fit_findings)  # then far-off corners are the lens's echo
-    corner_finding, without_corners = ((None, None) if lens_blamed or line_findings
-                                       else _outlier_corners(result, obj, img, res))
+    corner_finding, without_corners, _ = ((None, None, []) if lens_blamed or line_findings
+                                          else _outlier_corners(result, obj, img, res))
+    left_out = list(getattr(result, "left_out_corners", []) or [])
+    if corner_finding is None and left_out:
+        corner_finding = Finding(
+            "outlier_corners", "doubtful",
+            f"{len(left_out)} corner(s) lay far from where the camera puts them and were left out before this "
+            f"calibration ({'; '.join(_corner_words(h) for h in left_out[:6])}"
+            f"{f' ... ({len(left_out)} in all)' if len(left_out) > 6 else ''})",
+            "nothing to do for this calibration; re-detect those views or look at them: a corner the detector put "
+            "on clutter, a reflection or the board's edge", sorted({h["view"] for h in left_out}))
     if corner_finding is not None:
         findings.append(corner_finding)
     rho = _neighbour_correlation(obj, res)

@@ -255,8 +255,8 @@ def calibrate_without_outlier_views(object_points, image_points, image_size, **k
         limit = OUTLIER_FACTOR * float(np.median(pv))
         worst = [k for k in np.argsort(-pv) if pv[k] > limit]
         worst = worst[: max(0, min(budget - len(dropped), len(keep) - MIN_SAMPLES))]
-        if not worst:
-            return result, sorted(dropped)
+        if not worst:  # then single corners far off: named, left out, calibrated again
+            return result.without_outlier_corners(), sorted(dropped)
         dropped += [keep[k] for k in worst]
         keep = [i for k, i in enumerate(keep) if k not in set(worst)]
         kept = [k for k in range(len(pv)) if k not in set(worst)]

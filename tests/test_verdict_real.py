@@ -106,6 +106,13 @@ def test_a_single_displaced_corner_is_named_left_out_and_recalibrated(real):
     assert abs(again.K[0, 0] - res.K[0, 0]) < 0.1 * res.std["fx"]
     # and the clean set names no corner
     assert not any(f.code == "outlier_corners" for f in res.quality().findings)
+    # what the command line and the live CALIBRATE run: the corner is left out of the calibration they keep
+    kept, dropped = calibrate_without_outlier_views(res.object_points, img, res.image_size, model=res.model)
+    assert dropped == [] and kept.n_points == planted.n_points - 1
+    assert [(c["view"], c["corner"], c["column"], c["row"]) for c in kept.left_out_corners] == [(3, 20, 2, 2)]
+    np.testing.assert_allclose(kept.K, again.K, rtol=1e-6)
+    f = next(f for f in kept.quality().findings if f.code == "outlier_corners")
+    assert "left out" in f.message and "view 3 corner 20 (column 2, row 2)" in f.message, str(f)
 
 
 def test_planted_defects_on_real_photographs_are_named(real):
