@@ -13,8 +13,8 @@ It calibrates them with Zhang's model (``radial2`` with skew) and prints the cam
 result: alpha 832.50, beta 832.53, gamma 0.2045, u0 303.96, v0 206.59, k1 -0.2286, k2 0.1904) and the
 verdict with every finding and note: the residual against the corner noise, what the finer lens models
 and the board warp explain. Measured 2026-11-27 (the points to 0.01 px): the camera to 0.01 px of
-Zhang's; residual 3.1x the corner noise; tangential terms and the rational model explain 1.5-1.6 % of the
-excess, the warp 0 %; verdict doubtful (5 views; a radial pattern of -0.04 px the finer models do not
+Zhang's; residual 3.1x the corner noise; the rational model (which holds the tangential terms) explains
+1.5 % of the excess, the warp 0 %; verdict doubtful (5 views; a radial pattern of -0.04 px the finer models do not
 remove), no lens-model advice.
 """
 

@@ -89,7 +89,7 @@ TABLE: tuple[Limit, ...] = (
           "the print and the detector leave a residual above the noise on every real set; beyond this it is "
           "more than any clean real set shows",
           "OpenCV's real photographs 1.73-2.04 (and 1.5-2.5 on every subset, issue 21); Zhang's published "
-          "corners 3.13 (benchmarks/bench_zhang.py; tangential and rational terms explain 1.5-1.6 % of it): all "
+          "corners 3.13 (benchmarks/bench_zhang.py; tangential or rational terms explain 1.5-1.6 % of it): all "
           "below, so none is doubtful for this"),
     Limit("unexplained_ratio_bad", 8.0, "residual sigma / corner noise", "verdict 'bad' (quality)",
           "twice the doubtful limit: a residual the model, the lens and the board cannot explain",

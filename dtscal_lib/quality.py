@@ -612,7 +612,7 @@ def _radial_finding(result, res, noise) -> Finding | None:
 
 def _richer_model(result, noise: float, fits: dict | None) -> str:
     """Advice about the lens model, from the richer models actually fitted (:func:`_richer_fits`)."""
-    fits = _richer_fits(result) if fits is None else fits
+    fits = _richer_fits(result, noise) if fits is None else fits
     lens = {k: f for k, f in fits.items() if k != "warp"}
     name, share = _best_lens(result, noise, lens)
     if name is not None and share >= LENS_SHARE:
@@ -630,26 +630,44 @@ _LENS_ADVICE = {"k3": "estimate k3 as well (dtscal_lib.calibration.calibrate(...
                 "tangential": "use --model plumb_bob (radial2 has no tangential terms)"}
 
 
-def _richer_fits(result) -> dict:
-    """The finer lens models and the board warp fitted to a result's own corners (:mod:`dtscal_lib.richer`)."""
-    from .richer import candidates, fit_richer
-    out = {}
-    for name in candidates(result) + ["warp"]:
+def _richer_fits(result, noise: float | None = None) -> dict:
+    """The finer lens models and the board warp fitted to a result's own corners (:mod:`dtscal_lib.richer`).
+
+    The rational model holds every other lens candidate (k3, tangential terms), so they are fitted only when
+    it explains at least :data:`LENS_SHARE` of the residual above ``noise`` (to name the smallest model that
+    does): the common case costs two fits (``benchmarks/bench_calibrate.py``).
+    """
+    from .richer import candidates, excess_share, fit_richer
+
+    def fit(name):
         try:
             out[name] = fit_richer(result, name)
         except (cv2.error, np.linalg.LinAlgError, ValueError):
-            continue
+            pass
+
+    out: dict = {}
+    fit("rational")
+    fit("warp")
+    rational = out.get("rational")
+    if noise is None or rational is None or excess_share(result.sigma, rational.sigma, noise) >= LENS_SHARE:
+        for name in candidates(result):
+            if name not in out:
+                fit(name)
     return out
 
 
 def _best_lens(result, noise, lens: dict) -> tuple[str | None, float]:
+    """The lens candidate to name: the one with fewest parameters among those explaining at least
+    :data:`LENS_SHARE` of the residual above the noise (k3 before the rational model: ROS's files hold k3),
+    else the one explaining most."""
     from .richer import excess_share
-    best = (None, 0.0)
-    for k, f in lens.items():
-        share = excess_share(result.sigma, f.sigma, noise)
-        if share > best[1]:
-            best = (k, share)
-    return best
+    shares = {k: excess_share(result.sigma, f.sigma, noise) for k, f in lens.items()}
+    enough = [k for k, v in shares.items() if v >= LENS_SHARE]
+    if enough:
+        k = min(enough, key=lambda n: (lens[n].n_params, -shares[n]))
+        return k, shares[k]
+    k = max(shares, key=shares.get, default=None)
+    return (k, shares[k]) if k is not None and shares[k] > 0 else (None, 0.0)
 
 
 def _fit_findings(result, noise: float):
@@ -667,7 +685,7 @@ def _fit_findings(result, noise: float):
     ratio = result.sigma / noise
     if not ratio > FIT_RATIO_DOUBTFUL:
         return [], [], None
-    fits = _richer_fits(result)
+    fits = _richer_fits(result, noise)
     lens = {k: f for k, f in fits.items() if k != "warp"}
     name, share = _best_lens(result, noise, lens)
     warp = fits.get("warp")
@@ -689,7 +707,8 @@ def _fit_findings(result, noise: float):
         warp_words = (f"a board warp as mrcal fits it (the middle of the board {mm[0]:+.2f} mm along its x axis, "
                       f"{mm[1]:+.2f} mm along y, out of its plane) brings sigma to {warp.sigma:.3f} px "
                       f"({100 * wshare:.0f} % of the excess)")
-    lens_words = (f"{' and '.join(_LENS_WORDS[k] for k in lens)} explain at most {100 * share:.0f} %" if lens
+    lens_words = (f"{' and '.join(_LENS_WORDS[k] for k in lens)} explain{'s' if len(lens) == 1 else ''} "
+                  f"{'at most ' if len(lens) > 1 else ''}{100 * share:.0f} %" if lens
                   else "no finer lens model could be fitted")
     # with fewer views than min_good_views the two warp terms trade off against the few poses
     if warp is not None and wshare >= LENS_SHARE and result.n_views >= MIN_GOOD_VIEWS:
