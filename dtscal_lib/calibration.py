@@ -70,7 +70,7 @@ from .covariance import NormalBlocks, honest_intrinsic_covariance
 from .covariance import rodrigues as _rodrigues
 from .errors import CalibrationError, DtscalError
 from .homography import estimate_homography
-from .quality import assess
+from .quality import assess, leave_out_outlier_corners
 from .validation import check_image_size
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
@@ -150,6 +150,10 @@ class CalibrationResult:
     std_method: str = ""
     #: (n, n) covariance of the intrinsics in the order of ``std`` (the one ``std`` is the diagonal of)
     covariance: np.ndarray | None = field(default=None, repr=False)
+    #: single corners left out as outliers before this fit (:func:`dtscal_lib.quality.leave_out_outlier_corners`),
+    #: each ``{"view", "corner", "column", "row", "residual_px", "robust_sigmas"}`` (corner: its index in the view
+    #: as detected); the views' points here no longer hold them
+    left_out_corners: list = field(default_factory=list)
 
     def quality(self, **kw):
         """Verdict, systematic-residual checks and projection uncertainty: :func:`dtscal_lib.quality.assess`."""
@@ -180,6 +184,11 @@ class CalibrationResult:
         if self.covariance is None:
             self.covariance = honest_intrinsic_covariance(self.normal_blocks())[0]
         return self.covariance
+
+    def without_outlier_corners(self) -> "CalibrationResult":
+        """This calibration repeated without its single far-off corners, which ``left_out_corners`` then names
+        (:func:`dtscal_lib.quality.leave_out_outlier_corners`); itself when there is none."""
+        return leave_out_outlier_corners(self)
 
     def refit(self, object_points, image_points) -> "CalibrationResult":
         """:func:`calibrate` other views with this result's model, skew and k3 choice."""
@@ -213,6 +222,7 @@ class CalibrationResult:
             "n_views": int(self.n_views),
             "n_points": int(self.n_points),
             "iterations": int(self.iterations),
+            "left_out_corners": [dict(c) for c in self.left_out_corners],
         }
 
 

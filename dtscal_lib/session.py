@@ -255,8 +255,8 @@ def calibrate_without_outlier_views(object_points, image_points, image_size, **k
         limit = OUTLIER_FACTOR * float(np.median(pv))
         worst = [k for k in np.argsort(-pv) if pv[k] > limit]
         worst = worst[: max(0, min(budget - len(dropped), len(keep) - MIN_SAMPLES))]
-        if not worst:
-            return result, sorted(dropped)
+        if not worst:  # then single corners far off: named, left out, calibrated again
+            return result.without_outlier_corners(), sorted(dropped)
         dropped += [keep[k] for k in worst]
         keep = [i for k, i in enumerate(keep) if k not in set(worst)]
         kept = [k for k in range(len(pv)) if k not in set(worst)]
@@ -425,7 +425,7 @@ class IntrinsicSession:
         """Calibrate from the kept views (views that fit far worse dropped); raises with what to do.
 
         ``solver`` (optional) computes ``calibrate_without_outlier_views`` elsewhere (the live tool's
-        helper process): an object with ``calibrate(obj, img, size, model) -> (result, dropped)``.
+        helper process): an object with ``calibrate(obj, img, size, model, skew=...) -> (result, dropped)``.
         """
         obj, img, size = self.views()
         bars = self._bars_now()
@@ -444,7 +444,7 @@ class IntrinsicSession:
                 f"{MIN_SAMPLES} views at different positions and tilts: check --board/--square, and show the "
                 "whole board (not touching the image border) at several places and angles")
         if solver is not None:
-            result, dropped = solver.calibrate(obj, img, size, self.model)
+            result, dropped = solver.calibrate(obj, img, size, self.model, skew=self.skew)
         else:
             result, dropped = calibrate_without_outlier_views(obj, img, size, model=self.model, skew=self.skew)
         if not np.all(np.isfinite(result.K)):
