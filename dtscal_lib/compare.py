@@ -207,7 +207,13 @@ def _sigma_of(source, pixels: np.ndarray) -> np.ndarray | None:
     if hasattr(source, "normal_blocks") and getattr(source, "object_points", None):
         from .quality import projection_uncertainty, worst_direction_sigma
 
-        return worst_direction_sigma(projection_uncertainty(source, pixels, distance=np.inf))
+        # the parameters' honest covariance (the larger of the noise model and the views' disagreement,
+        # :meth:`CalibrationResult.intrinsic_covariance`), not the noise model alone that the verdict's
+        # image-corner figure shares with mrcal: two calibrations of one camera from different views differ by
+        # what the views disagree on (on data/real 1.3-2.6x the noise model, docs/uncertainty.md), and "within its
+        # uncertainty" must not call that a change of the camera
+        cov = (source.normal_blocks(), source.intrinsic_covariance())
+        return worst_direction_sigma(projection_uncertainty(source, pixels, distance=np.inf, cov=cov))
     return None
 
 
