@@ -68,7 +68,7 @@ def test_handout_readme_names_only_files_the_handout_has(handout):
         target = handout / name if "/" in name or not name.endswith(".ipynb") else handout / "notebooks" / name
         assert target.exists(), f"the hand-out README names {name}, which the hand-out does not have"
     nbs = sorted(p.name for p in (handout / "notebooks").glob("*.ipynb"))
-    assert len(nbs) == 6 and all(f"`{n}`" in readme for n in nbs)  # the student's whole path
+    assert len(nbs) == 7 and all(f"`{n}`" in readme for n in nbs)  # the student's whole path
     for words in ("bash start.sh --handin", "git push", "bash start.sh --update", "sudo bash scripts/install-ros.sh",
                   "ROS_MASTER_URI", "ROS_IP"):
         assert words in readme, words

@@ -63,14 +63,16 @@ class Roster:
             self._scratch = None
 
 
-#: course notebooks that exist but hold no graded exercise
-UNGRADED = {"06": "notebook 06 (the Duckiebot camera session) is not graded"}
+#: course notebooks that exist but hold no graded exercise: (file-name prefix, a word of the name, why)
+UNGRADED = (("06", "duckiebot_camera", "notebook 06 (the Duckiebot camera session) is not graded"),
+            ("03b", "calibration_quality", "notebook 03b (calibration quality: predictions and experiments, no "
+                                           "exercise function) is not graded"))
 
 
 def _ungraded(name: str) -> str | None:
     stem = Path(name).stem.lower()
-    for prefix, why in UNGRADED.items():
-        if stem.startswith(prefix) or "duckiebot_camera" in stem:
+    for prefix, word, why in UNGRADED:
+        if stem.startswith(prefix) or word in stem:
             return why
     return None
 

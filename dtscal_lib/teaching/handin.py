@@ -1,6 +1,6 @@
 """``dtscal handin``: one zip of the student's workspace notebooks, for the instructor or Gradescope.
 
-The zip holds the notebooks of ``workspace/`` (the six course notebooks the student writes in,
+The zip holds the notebooks of ``workspace/`` (the seven course notebooks the student writes in,
 under their course names, at the top of the zip) and nothing else: no backups, nothing of the
 kit. It is named for the student (``handin/<name>.zip``), so that ``dtscal grade handin/ada.zip``
 grades it as the student ``ada``, and Gradescope, which unpacks an uploaded zip into the

@@ -74,7 +74,7 @@ handin/
 """
 STUDENT_README = """# Camera calibration for Duckietown: the course
 
-Six JupyterLab notebooks in which you write the pieces of camera calibration yourself and then
+Seven JupyterLab notebooks in which you write the pieces of camera calibration yourself and then
 calibrate a Duckiebot's camera with them. A recorded Duckiebot camera session is included, so no robot
 is needed until the last notebook, and not even there.
 
@@ -83,6 +83,7 @@ is needed until the last notebook, and not even there.
 | `01_pinhole_projection.ipynb` | the pinhole camera: from a 3-D point to a pixel |
 | `02_homography.ipynb` | homographies: a flat board in one 3x3 matrix |
 | `03_intrinsic_calibration.ipynb` | intrinsic calibration: Zhang's method by hand |
+| `03b_calibration_quality.ipynb` | nothing to write: is the calibration good enough, and how much data it needs |
 | `04_distortion_rectification.ipynb` | lens distortion and rectification |
 | `05_extrinsic_calibration.ipynb` | extrinsic calibration: from pixels to the ground |
 | `06_duckiebot_camera.ipynb` | the Duckiebot camera: live calibration in JupyterLab (a robot, or the recording) |
@@ -115,7 +116,7 @@ Add your own notes and scratch cells wherever you like: they are yours and stay 
 Your instructor says which of the two:
 
 * **A file** (Gradescope or an upload): run `bash start.sh --handin`. It writes `handin/NAME.zip` with
-  your six workspace notebooks (NAME is your git name or login; `bash start.sh --handin --name "Ada
+  your seven workspace notebooks (NAME is your git name or login; `bash start.sh --handin --name "Ada
   Lovelace"` sets it). Upload that zip as it is.
 * **GitHub Classroom**: this folder is a git repository and your work in `workspace/` is part of it.
   Commit and push: `git add -A && git commit -m "hand in" && git push`. (Backups and `.venv/` are left

@@ -49,7 +49,7 @@ BACKUPS = "backups"
 #: hidden folder of the course version each workspace notebook was built from
 BASE = ".course"
 LOCK = ".update.lock"
-#: a second update waits this long for the first (an update of six notebooks takes about a second)
+#: a second update waits this long for the first (an update of seven notebooks takes about a second)
 LOCK_WAIT_S = 120.0
 #: tag of the raw cells in which an update keeps code it could not place
 KEPT_TAG = "dtscal_kept"
