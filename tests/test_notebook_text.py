@@ -17,6 +17,7 @@ from nbtools import SOLUTIONS, execute_student_once
 
 NB01, NB02, NB03 = "01_pinhole_projection.ipynb", "02_homography.ipynb", "03_intrinsic_calibration.ipynb"
 NB04, NB05 = "04_distortion_rectification.ipynb", "05_extrinsic_calibration.ipynb"
+NB03B = "03b_calibration_quality.ipynb"
 
 
 def _text(nb) -> str:
@@ -125,12 +126,28 @@ def _claims_03(nb) -> None:
     ranks = dict(re.findall(r"^(tilted|parallel|fronto)\s*: rank of V = ([0-9])", text, re.MULTILINE))
     assert ranks == {"tilted": "5", "parallel": "2", "fronto": "2"}
     assert "facing the camera, the equations involve only B11, B12, B22" in text
+    assert "np.float64(" not in text
+
+
+def _claims_03b(nb) -> None:
+    """Notebook 03's later sections (split off by issue 24): residuals, poses, the verdict, how much data."""
+    prose, text, code = _prose(nb), _text(nb), _code(nb)
+    # section 1 recomputes the table the verdict's prose refers to ("the table in section 1")
+    assert "(the table in section 1)" in prose and _table_err(text, "full calibration (with distortion)") < 0.5
+    assert _table_err(text, "closed form, detected corners") > 5.0
+    assert 'course.notebook_function("03_intrinsic_calibration.ipynb", "intrinsics_from_homographies")' in code
+    assert 'course.notebook_function("03_intrinsic_calibration.ipynb", "extrinsics_from_homography")' in code
     # one configuration, one number: 10 views tilted 20-45 deg in both tables
     n10 = re.search(r"^\s+10\s+(\S+)$", text, re.MULTILINE).group(1)
     t2045 = re.search(r"^\s+20-45 deg\s+(\S+)$", text, re.MULTILINE).group(1)
     assert n10 == t2045
     # the quality verdict is reconciled with the error, and the advice with the map's labels
     assert "The verdict is about uncertainty, not error." in prose and "(board units)" not in text
+    verdict = re.search(r"^verdict: (good|doubtful|bad)$", text, re.MULTILINE).group(1)
+    assert "here the verdict agrees" not in prose or verdict == "good"  # agrees with "within a fraction of a pixel"
+    # the experiment the student changes: its knobs are named variables the table is computed with
+    assert "noise_px = 0.2" in code and "noise_px=noise_px, trials=trials" in code
+    assert "noise 0.2 px, median over 10 random view sets" in text
     assert "once 40 views are collected" in prose
     assert "each board shows a coherent swirl" not in prose
     assert ("per-view RMS error reaches several pixels, while the full\ncalibration stays far below a pixel "
@@ -204,7 +221,8 @@ def _claims_05(nb) -> None:
     assert f"500 mm x sin(2 deg) = {500 * math.sin(math.radians(2)):.0f} mm" in code
 
 
-CLAIMS = {NB01: _claims_01, NB02: _claims_02, NB03: _claims_03, NB04: _claims_04, NB05: _claims_05}
+CLAIMS = {NB01: _claims_01, NB02: _claims_02, NB03: _claims_03, NB03B: _claims_03b, NB04: _claims_04,
+          NB05: _claims_05}
 
 
 @pytest.mark.parametrize("name", sorted(CLAIMS))
@@ -219,3 +237,46 @@ def test_prose_matches_what_a_student_sees_first(name, notebook_runs):
     text = _text(nb)
     assert "!! -> using" in text  # the stand-in path really ran (a banner said so)
     CLAIMS[name](nb)
+
+
+# =========================================================================== pacing (issue 24)
+#: every notebook a student opens: the course's notebooks are exactly the solutions (notebooks/ is generated)
+ALL_NOTEBOOKS = sorted(p.name for p in SOLUTIONS.glob("*.ipynb"))
+#: issue 24's acceptance: "No notebook over about 90 minutes by its stated estimate"
+MAX_MINUTES = 90
+
+
+def stated_minutes(nb) -> int:
+    """The estimate the notebook states at its top, in minutes: the first cell's '*Expected time: about ...*'."""
+    first = nb.cells[0]
+    assert first.cell_type == "markdown", "the first cell is not the notebook's title and estimate"
+    m = re.search(r"^\*Expected time: about (?:(\d+) hours?)?\s*(?:(\d+) minutes)?", first.source, re.MULTILINE)
+    assert m and (m.group(1) or m.group(2)), f"no '*Expected time: about N minutes' line at the top:\n{first.source}"
+    return 60 * int(m.group(1) or 0) + int(m.group(2) or 0)
+
+
+def test_stated_minutes_parses_hours_and_minutes():
+    md = nbformat.v4.new_markdown_cell
+    assert stated_minutes(nbformat.v4.new_notebook(cells=[md("# t\n\n*Expected time: about 2 hours 30 minutes.*")])) == 150
+    assert stated_minutes(nbformat.v4.new_notebook(cells=[md("# t\n\n*Expected time: about 75 minutes (x 20).*")])) == 75
+    with pytest.raises(AssertionError, match="Expected time"):
+        stated_minutes(nbformat.v4.new_notebook(cells=[md("# t\n\nno estimate here")]))
+
+
+@pytest.mark.parametrize("name", ALL_NOTEBOOKS)
+def test_every_notebook_states_its_time_and_it_is_at_most_90_minutes(name):
+    nb = nbformat.read(str(SOLUTIONS / name), as_version=4)
+    minutes = stated_minutes(nb)
+    assert 0 < minutes <= MAX_MINUTES, f"{name} states {minutes} minutes; split it (issue 24: at most about 90)"
+    # the parts it lists in brackets add up to the total it states ("(the exercises 45, the figures 20, ...)")
+    head = nb.cells[0].source.split("*Expected time:", 1)[1].split("*", 1)[0]
+    parts = re.search(r"\(([^)]*)\)", head)
+    if parts:
+        numbers = [int(n) for n in re.findall(r" (\d+)(?=[,;)]|$)", parts.group(1) + ")")]
+        if len(numbers) >= 2:
+            assert sum(numbers) == minutes, f"{name}: the parts {numbers} do not add up to {minutes} minutes"
+
+
+def test_the_course_has_a_notebook_per_part_of_split_notebook_03():
+    assert {"03_intrinsic_calibration.ipynb", "03b_calibration_quality.ipynb"} <= set(ALL_NOTEBOOKS)
+    assert (SOLUTIONS.parent / "notebooks" / "03b_calibration_quality.ipynb").exists()
