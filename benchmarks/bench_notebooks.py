@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-COURSE = ("01_pinhole_projection", "02_homography", "03_intrinsic_calibration",
+COURSE = ("01_pinhole_projection", "02_homography", "03_intrinsic_calibration", "03b_calibration_quality",
           "04_distortion_rectification", "05_extrinsic_calibration")
 TARGET_S = 60.0
 

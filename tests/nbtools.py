@@ -16,6 +16,8 @@ NOTEBOOKS = ROOT / "notebooks"
 #: every course notebook; 03-05 are written by another helper and tested as soon as they exist
 COURSE = ("01_pinhole_projection", "02_homography", "03_intrinsic_calibration",
           "04_distortion_rectification", "05_extrinsic_calibration")
+#: course notebooks with predictions and experiments but no exercise function (not graded; 06 has its own tests)
+UNGRADED_COURSE = ("03b_calibration_quality",)
 REPORT_RE = re.compile(r"^\[( |x|!)\] (\w+):", re.MULTILINE)
 
 
@@ -29,15 +31,15 @@ def need(path: Path) -> Path:
     return path
 
 
-def execute(nb: nbformat.NotebookNode, timeout: int = 120) -> tuple[nbformat.NotebookNode, float]:
-    """Run a notebook top to bottom in the repo root with nbclient; errors stay in the cells.
+def execute(nb: nbformat.NotebookNode, timeout: int = 120, cwd: Path = ROOT) -> tuple[nbformat.NotebookNode, float]:
+    """Run a notebook top to bottom in ``cwd`` (default the repo root) with nbclient; errors stay in the cells.
 
     Returns ``(nb, seconds)``; the seconds are for benchmarks/bench_notebooks.py, no test asserts them.
     ``timeout`` (per cell) is a safety net, about 10x the slowest cell."""
     from nbclient import NotebookClient
 
     client = NotebookClient(nb, timeout=timeout, kernel_name="python3", allow_errors=True,
-                            resources={"metadata": {"path": str(ROOT)}})
+                            resources={"metadata": {"path": str(cwd)}})
     t0 = time.perf_counter()
     client.execute()
     return nb, time.perf_counter() - t0

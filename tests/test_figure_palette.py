@@ -79,7 +79,7 @@ def _png_size(data: bytes) -> tuple[int, int]:
 
 
 COURSE = ["01_pinhole_projection.ipynb", "02_homography.ipynb", "03_intrinsic_calibration.ipynb",
-          "04_distortion_rectification.ipynb", "05_extrinsic_calibration.ipynb"]
+          "03b_calibration_quality.ipynb", "04_distortion_rectification.ipynb", "05_extrinsic_calibration.ipynb"]
 
 
 @pytest.mark.parametrize("name", COURSE)

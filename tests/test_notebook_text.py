@@ -256,11 +256,14 @@ def stated_minutes(nb) -> int:
 
 
 def test_stated_minutes_parses_hours_and_minutes():
-    md = nbformat.v4.new_markdown_cell
-    assert stated_minutes(nbformat.v4.new_notebook(cells=[md("# t\n\n*Expected time: about 2 hours 30 minutes.*")])) == 150
-    assert stated_minutes(nbformat.v4.new_notebook(cells=[md("# t\n\n*Expected time: about 75 minutes (x 20).*")])) == 75
+    def top(text):
+        return nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(f"# t\n\n{text}")])
+
+    assert stated_minutes(top("*Expected time: about 2 hours 30 minutes, best split over two sessions.*")) == 150
+    assert stated_minutes(top("*Expected time: about 75 minutes (the exercise 20).*")) == 75
+    assert stated_minutes(top("*Expected time: about 1 hour.*")) == 60
     with pytest.raises(AssertionError, match="Expected time"):
-        stated_minutes(nbformat.v4.new_notebook(cells=[md("# t\n\nno estimate here")]))
+        stated_minutes(top("no estimate here"))
 
 
 @pytest.mark.parametrize("name", ALL_NOTEBOOKS)

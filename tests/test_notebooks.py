@@ -9,8 +9,8 @@ import nbformat
 import pytest
 
 from dtscal_lib.teaching.release import inject_solutions
-from nbtools import (COURSE, NOTEBOOKS, SOLUTIONS, cell_errors, execute, execute_student_once,
-                     exercise_functions, need, reports)
+from nbtools import (COURSE, NOTEBOOKS, SOLUTIONS, UNGRADED_COURSE, cell_errors, execute, execute_student_once,
+                     exercise_functions, need, reports, stream_text)
 
 pytestmark = pytest.mark.slow
 
@@ -39,3 +39,37 @@ def test_pasted_solutions_pass_every_check(name):
     wanted = exercise_functions(nb)
     assert {f for _, f in found} >= set(wanted), f"{name}: checks missing for {set(wanted) - {f for _, f in found}}"
     assert all(mark == "x" for mark, _ in found), f"{name}: not every check passed: {found}"
+
+
+@pytest.mark.parametrize("name", UNGRADED_COURSE)
+def test_ungraded_notebook_runs_untouched_on_the_stand_ins(name, notebook_runs):
+    """03b has no exercise: handed out untouched (no solved 03 beside it) it runs to the end on the stand-ins."""
+    nb, _ = execute_student_once(name, notebook_runs)
+    assert not cell_errors(nb), f"{name}: errors escaped cells: {cell_errors(nb)}"
+    assert not exercise_functions(nb) and not reports(nb)
+    text = "".join(stream_text(c) for c in nb.cells if c.cell_type == "code")
+    for func in ("intrinsics_from_homographies", "extrinsics_from_homography"):
+        assert f"your `{func}` is not available" in text, func
+    assert text.count("[predict]") >= 3
+
+
+def test_03b_uses_the_students_notebook_03_functions_from_the_same_folder(tmp_path):
+    """In the student's workspace 03b reads 03's functions (course.notebook_function): a solved 03 is used,
+    an untouched one is not (its stubs fail their self-checks, and the stand-ins say so)."""
+    import shutil
+
+    ws = tmp_path / "workspace"
+    ws.mkdir()
+    student03 = nbformat.read(need(NOTEBOOKS / "03_intrinsic_calibration.ipynb"), as_version=4)
+    solution03 = nbformat.read(need(SOLUTIONS / "03_intrinsic_calibration.ipynb"), as_version=4)
+    nbformat.write(inject_solutions(student03, solution03), ws / "03_intrinsic_calibration.ipynb")
+    shutil.copy(need(NOTEBOOKS / "03b_calibration_quality.ipynb"), ws / "03b_calibration_quality.ipynb")
+    nb, _ = execute(nbformat.read(ws / "03b_calibration_quality.ipynb", as_version=4), cwd=ws)
+    assert not cell_errors(nb), cell_errors(nb)
+    text = "".join(stream_text(c) for c in nb.cells if c.cell_type == "code")
+    assert "using your `intrinsics_from_homographies`" in text and "using your `extrinsics_from_homography`" in text
+    assert "!! -> using" not in text  # no stand-in anywhere
+    nbformat.write(student03, ws / "03_intrinsic_calibration.ipynb")  # the stubs as handed out
+    nb, _ = execute(nbformat.read(ws / "03b_calibration_quality.ipynb", as_version=4), cwd=ws)
+    text = "".join(stream_text(c) for c in nb.cells if c.cell_type == "code")
+    assert not cell_errors(nb) and "`intrinsics_from_homographies` is not implemented yet" in text
