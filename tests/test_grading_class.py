@@ -87,6 +87,7 @@ def test_assignment_never_grades_another_notebook(tmp_path, capsys):
     d.mkdir(parents=True)
     shutil.copy(SOL / "01_pinhole_projection.ipynb", d / "01_pinhole_projection.ipynb")
     shutil.copy(SOL / "06_duckiebot_camera.ipynb", d / "06_duckiebot_camera.ipynb")
+    shutil.copy(SOL / "03b_calibration_quality.ipynb", d / "03b_calibration_quality.ipynb")
     shutil.copy(SOL / "01_pinhole_projection.ipynb", d / "mystery.ipynb")
     out = tmp_path / "g.csv"
     assert dtscal(["grade", str(tmp_path / "class"), "--assignment", "02", "--csv", str(out), "-q"]) == 0
@@ -95,6 +96,7 @@ def test_assignment_never_grades_another_notebook(tmp_path, capsys):
     assert "its name says notebook 01_pinhole_projection, not 02_homography" in row["notes"]
     assert "mystery.ipynb: not graded as 02_homography: it defines the functions of 01" in row["notes"]
     assert "not graded: notebook 06" in row["notes"]
+    assert "03b_calibration_quality.ipynb: not graded: notebook 03b" in row["notes"]  # no exercise, not an error
     assert "02_homography: not handed in" in row["notes"]
 
 
@@ -127,3 +129,20 @@ def test_class_report_in_chromium(klass):
             assert page.locator("#notes tbody tr").count() >= 5
         finally:
             browser.close()
+
+
+def test_notebook_03b_names_no_assignment_and_is_listed_as_not_graded(tmp_path):
+    """Issue 24 split notebook 03: its later half, 03b, has no graded function, so it is not graded (like 06), and
+    its name never makes the grader take it for notebook 03."""
+    from dtscal_lib.grading.material import ASSIGNMENTS, assignment_of
+
+    assert assignment_of("03b_calibration_quality.ipynb") is None
+    assert assignment_of("homework-03b_calibration_quality.ipynb") is None
+    assert assignment_of("03_intrinsic_calibration.ipynb") == "03_intrinsic_calibration"
+    assert "03b_calibration_quality" not in ASSIGNMENTS
+    out = tmp_path / "g.csv"
+    assert dtscal(["grade", str(SOL / "03b_calibration_quality.ipynb"), "--csv", str(out), "-q"]) == 0
+    notes = next(csv.DictReader(open(out)))["notes"]
+    assert "not graded: notebook 03b" in notes and "pass --assignment" not in notes
+    assert dtscal(["grade", str(SOL / "03b_calibration_quality.ipynb"), "--assignment", "03b", "--csv",
+                   str(out), "-q"]) == 2
