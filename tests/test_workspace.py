@@ -435,3 +435,50 @@ def test_update_on_a_full_disk_changes_nothing(tmp_path):
         _assert_nothing_lost(wsdir)
     finally:
         subprocess.run(["umount", "-l", str(mnt)])
+
+
+def test_update_across_the_split_of_notebook_03_keeps_the_students_code_and_adds_03b(tmp_path):
+    """Issue 24 split notebook 03 in two. A workspace made from the one-piece 03 (rebuilt here: today's 03, then
+    03b's cells after its own set-up, which is what the later sections were) updates to 03 + 03b: the student's
+    functions and predictions stay in 03, 03b arrives new, and a later-section cell the student edited is kept
+    in 03, saying it moved to 03b."""
+    sol03 = nbformat.read(str(ROOT / "solutions" / "03_intrinsic_calibration.ipynb"), as_version=4)
+    sol03b = nbformat.read(str(ROOT / "solutions" / "03b_calibration_quality.ipynb"), as_version=4)
+    first_moved = next(i for i, c in enumerate(sol03b.cells) if c.id == "c322d105")  # the residuals cell of old 03
+    before = nbformat.from_dict(dict(sol03, cells=sol03.cells + sol03b.cells[first_moved:]))
+    root = tmp_path / "kit"
+    (root / "solutions").mkdir(parents=True)
+    nbformat.write(before, str(root / "solutions" / "03_intrinsic_calibration.ipynb"))
+    rel.generate_notebooks(root / "solutions", root / "notebooks")
+    wsdir = ws.ensure_workspace(root)
+    path = wsdir / "03_intrinsic_calibration.ipynb"
+    code = ["    return np.zeros((2, 6))  # mine"]
+    _write_student_code(path, "intrinsic_constraints", code)
+    nb = nbformat.read(str(path), as_version=4)
+    for cell in nb.cells:
+        if "predict_rank_parallel = None" in cell.source:  # a prediction cell that stays in 03
+            cell.source = cell.source.replace("predict_rank_parallel = None", "predict_rank_parallel = 3")
+        if cell.source.startswith("noise_px = 0.2"):  # the experiment, which moves to 03b
+            cell.source = cell.source.replace("noise_px = 0.2", "noise_px = 0.5", 1)
+    nb.cells.append(nbformat.v4.new_markdown_cell("my notes on the degradation tables"))
+    nbformat.write(nb, str(path))
+
+    (root / "solutions" / "03_intrinsic_calibration.ipynb").unlink()
+    for p in (ROOT / "solutions").glob("03*.ipynb"):
+        shutil.copyfile(p, root / "solutions" / p.name)
+    rel.generate_notebooks(root / "solutions", root / "notebooks")
+    report = ws.update_workspace(root, stamp="split")
+    assert report.added == ["03b_calibration_quality.ipynb"]
+    assert report.carried["03_intrinsic_calibration.ipynb"] == ["intrinsic_constraints"]
+    assert (wsdir / "03b_calibration_quality.ipynb").read_bytes() == (
+        root / "notebooks" / "03b_calibration_quality.ipynb").read_bytes()
+    after = nbformat.read(str(path), as_version=4)
+    sources = [c.source for c in after.cells]
+    assert any(code[0] in s and "def intrinsic_constraints(" in s for s in sources)
+    assert any("predict_rank_parallel = 3" in s for s in sources)
+    assert "my notes on the degradation tables" in sources
+    kept = [c.source for c in after.cells if ws.KEPT_TAG in c.metadata.get("tags", [])]
+    assert len(kept) == 1 and "noise_px = 0.5" in kept[0] and "moved to 03b_calibration_quality.ipynb" in kept[0]
+    assert any("moved to 03b_calibration_quality.ipynb" in line for line in report.kept)
+    assert not any(s.startswith("noise_px = 0.2") for s in sources)  # the course's own copy is in 03b now
+    assert (wsdir / "backups" / "split" / "03_intrinsic_calibration.ipynb").exists()

@@ -202,11 +202,13 @@ def _stubbed(source: str) -> str:
     return "\n".join(lines)
 
 
-def merge_notebook(old, new, base=None, name: str = "notebook"):
+def merge_notebook(old, new, base=None, name: str = "notebook", moved: dict | None = None):
     """The new course notebook with everything of the student's from ``old`` in it.
 
     ``base`` is the course version ``old`` was built from (``None`` when unknown: then every
     course cell whose text differs from the new course is treated as possibly edited and kept).
+    ``moved`` maps the cell ids of the other new course notebooks to their names: an edited course
+    cell the new course moved there (notebook 03 was split into 03 and 03b) is kept, saying where it went.
     Returns ``(merged notebook, carried functions, kept lines, number of own cells)``.
     """
     merged = copy.deepcopy(new)
@@ -288,9 +290,11 @@ def merge_notebook(old, new, base=None, name: str = "notebook"):
                             if f not in placed and not _stub_lines(body)] if _is_exercise(c) else []
             edited = (b is not None and b.source != c.source) or (b is None and base is None and c.cell_type == "code")
             if regions_lost or (edited and not _is_exercise(c)):
+                went = (moved or {}).get(c.get("id")) if c.get("id") else None
                 why = (f"your code for {', '.join(f'`{f}`' for f in regions_lost)} has no place in the new "
                        "notebook (the function was renamed or removed)" if regions_lost else
-                       "a course cell you edited, which the new course no longer has")
+                       f"a course cell you edited, which the new course moved to {went}: copy your change there"
+                       if went else "a course cell you edited, which the new course no longer has")
                 after.setdefault(anchor, []).append(_kept_cell(c.source, why))
                 kept.append(f"{name}: {why}")
         else:
@@ -303,6 +307,21 @@ def merge_notebook(old, new, base=None, name: str = "notebook"):
     merged.cells = cells
     # regions whose cell was neither matched nor a course cell (cannot happen with tags) are kept too
     return merged, sorted(placed), kept, own
+
+
+def _cell_homes(course: list[Path]) -> dict[str, str]:
+    """Cell id -> the new course notebook holding it (ids are unique within a notebook; an unreadable
+    notebook is skipped here, and reported where it is merged)."""
+    homes: dict[str, str] = {}
+    for path in course:
+        try:
+            nb = nbformat.read(str(path), as_version=4)
+        except Exception:  # noqa: BLE001
+            continue
+        for c in nb.cells:
+            if c.get("id"):
+                homes.setdefault(c.get("id"), path.name)
+    return homes
 
 
 def _regions_safe(source: str) -> dict[str, list[str]]:
@@ -400,6 +419,7 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
         return report
     with _Lock(ws / LOCK, lock_wait_s):
         plans = []  # (name, merged notebook or None (new), old path)
+        homes = _cell_homes(course)
         for new_path in course:
             old_path = ws / new_path.name
             try:
@@ -424,7 +444,8 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
                     base = None
             _check_writable(old_path)
             try:
-                merged, placed, kept, own = merge_notebook(old, new, base, new_path.name)
+                moved = {cid: nb_name for cid, nb_name in homes.items() if nb_name != new_path.name}
+                merged, placed, kept, own = merge_notebook(old, new, base, new_path.name, moved)
             except Exception as exc:  # noqa: BLE001 (never lose a notebook to a merge it cannot do)
                 report.not_carried.append(f"{new_path.name}: could not be merged ({type(exc).__name__}: {exc}); "
                                           "left as it is")
