@@ -73,9 +73,12 @@ def test_every_file_it_names_exists():
 
 
 def test_every_notebook_it_names_exists():
-    for nb in set(re.findall(r"`(0\d_[a-z_]+)`", checked_text())):
+    named = set(re.findall(r"`(0\d[a-z]?_[a-z_]+)`", checked_text()))  # 03b too (issue 24 split 03)
+    for nb in named:
         assert (ROOT / "solutions" / f"{nb}.ipynb").exists(), nb
         assert (ROOT / "notebooks" / f"{nb}.ipynb").exists(), nb
+    # and the table names every notebook of the course
+    assert named >= {p.stem for p in (ROOT / "solutions").glob("*.ipynb")}
 
 
 def _command_lines() -> list[str]:
