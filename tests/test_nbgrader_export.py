@@ -167,3 +167,19 @@ def test_export_refuses_a_foreign_folder(tmp_path, capsys):
     (tmp_path / "notes.txt").write_text("mine")
     assert dtscal(["release", "--nbgrader", str(tmp_path)]) == 2
     assert "not an nbgrader course written by the kit" in capsys.readouterr().err
+
+
+def test_export_carries_the_ungraded_notebooks_without_test_cells(tmp_path):
+    """03b (split from 03 by issue 24) and 06 hold no exercise: exported read-only, with no autograded cell; 03 keeps
+    its three graded functions."""
+    assert dtscal(["release", "--nbgrader", str(tmp_path / "c")]) == 0
+    src = tmp_path / "c" / "source"
+    assert sorted(p.name for p in src.iterdir()) == sorted(p.stem for p in (ROOT / "solutions").glob("*.ipynb"))
+    for name in ("03b_calibration_quality", "06_duckiebot_camera"):
+        nb = json.loads((src / name / f"{name}.ipynb").read_text())
+        meta = [c["metadata"].get("nbgrader", {}) for c in nb["cells"]]
+        assert meta and not any(m.get("grade") or m.get("solution") for m in meta), name
+    nb = json.loads((src / "03_intrinsic_calibration" / "03_intrinsic_calibration.ipynb").read_text())
+    graded = sorted(c["metadata"]["nbgrader"]["grade_id"] for c in nb["cells"] if c["metadata"]["nbgrader"]["grade"])
+    assert graded == ["test_extrinsics_from_homography", "test_intrinsic_constraints",
+                      "test_intrinsics_from_homographies"]
