@@ -135,6 +135,7 @@ def _claims_03b(nb) -> None:
     # section 1 recomputes the table the verdict's prose refers to ("the table in section 1")
     assert "(the table in section 1)" in prose and _table_err(text, "full calibration (with distortion)") < 0.5
     assert _table_err(text, "closed form, detected corners") > 5.0
+    assert "the 25 views of the 7x5-corner, 31 mm board" in prose and "; using 25 views" in text
     assert 'course.notebook_function("03_intrinsic_calibration.ipynb", "intrinsics_from_homographies")' in code
     assert 'course.notebook_function("03_intrinsic_calibration.ipynb", "extrinsics_from_homography")' in code
     # one configuration, one number: 10 views tilted 20-45 deg in both tables
