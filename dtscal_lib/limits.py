@@ -38,7 +38,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 __all__ = ["Limit", "TABLE", "LIMITS", "INTRINSIC_LIMITS", "GROUND_CAMERA_LIMITS", "MIN_TILT_SPREAD_DEG",
-           "FOCAL_STD_UNDETERMINED", "TILT_BAD_DEG", "TILT_DOUBTFUL_DEG", "MIRROR_MIN_CONTRAST", "table_text"]
+           "FOCAL_STD_UNDETERMINED", "TILT_BAD_DEG", "TILT_DOUBTFUL_DEG", "MIRROR_MIN_CONTRAST", "GRID_TOLERANCE_PX",
+           "GRID_TOLERANCE_FRACTION", "SMOOTH_GRID_TOLERANCE", "table_text"]
 
 
 @dataclass(frozen=True)
@@ -159,6 +160,27 @@ TABLE: tuple[Limit, ...] = (
           "between light and dark squares the colours are not trusted and nothing is said",
           "Duckietown's printed pattern (tests/test_ground.py: near-right square dark); the synthetic "
           "session's rectified floor views show +176 to +181 grey levels, their mirror images -176 to -181"),
+    # ------------------------------------------------------------------ refusal of a found board (the detector)
+    Limit("grid_tolerance_px", 1.0, "px from the quadratic through 8 neighbours", "detector: board refused "
+          "'inconsistent_grid' (the corner named)",
+          "a corner this far off the smooth grid of its neighbours jumped off the board (a pulled refinement); "
+          "twice the largest flat jump measured, so a true corner passes and a smoothly curled print too",
+          "OpenCV's 26 real photographs (data/real/, 728 inner corners): jumps median 0.12 px, 99th percentile "
+          "0.36 px, at most 0.49 px (0.017 of a square); the same photographs curled (cv2.remap, Duckietown's "
+          "17 mm squares at 12-23 px): at most 0.75 px; Duckietown's curled DD24 print (lib-dt-computer-vision "
+          "assets) passes (benchmarks/grid_tolerance.py prints these)"),
+    Limit("grid_tolerance_fraction", 0.1, "of the corner's local square", "detector: as grid_tolerance_px "
+          "(whichever is larger)",
+          "big squares have proportionally bigger print and perspective deviations",
+          "OpenCV's 26 real photographs (data/real/): at most 0.017 of a square flat, 0.033 curled; a corner "
+          "displaced by a sixth of a square (0.17) is caught"),
+    Limit("smooth_grid_tolerance", 0.2, "of the smallest corner spacing", "detector: board refused "
+          "'inconsistent_grid' (the smooth-grid guard)",
+          "a flat board through perspective and a smooth lens is a cubic in the corner indices; a corner off "
+          "it by a fifth of a square is a wrong corner",
+          "true corners fit the cubic to 0.08 of a spacing (1500 random Duckiebot poses 0.18-1.3 m, tilts "
+          "up to 57 degrees, through Duckietown's default camera intrinsics, duckietown.md); OpenCV's 26 real "
+          "photographs (data/real/) all pass, 2 of 52 of them waved by 5 px are refused"),
 )
 
 #: every limit by name
@@ -169,6 +191,10 @@ FOCAL_STD_UNDETERMINED = LIMITS["focal_std_undetermined"].value
 TILT_BAD_DEG = LIMITS["tilt_bad"].value
 TILT_DOUBTFUL_DEG = LIMITS["tilt_doubtful"].value
 MIRROR_MIN_CONTRAST = LIMITS["mirror_min_contrast"].value
+#: the detector's refusal of a found board (:mod:`dtscal_lib.detect.grid`)
+GRID_TOLERANCE_PX = LIMITS["grid_tolerance_px"].value
+GRID_TOLERANCE_FRACTION = LIMITS["grid_tolerance_fraction"].value
+SMOOTH_GRID_TOLERANCE = LIMITS["smooth_grid_tolerance"].value
 
 #: the verdict's thresholds (:func:`dtscal_lib.quality.assess`)
 FIT_RATIO_DOUBTFUL = LIMITS["fit_ratio_doubtful"].value
