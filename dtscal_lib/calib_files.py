@@ -72,7 +72,10 @@ _UNSUPPORTED_MODELS = {
 INTRINSIC_KEYS = ("image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
                   "distortion_coefficients", "rectification_matrix", "projection_matrix")
 
-_ROBOT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+#: the one robot-name rule (files, topics, COMMIT, ``ros:NAME``): a Duckiebot's name is a component of its ROS
+#: topics ``/NAME/camera_node/...``, and ROS names hold letters, digits and underscores only (ROS wiki, "Names":
+#: "subsequent characters can be alphanumeric ([0-9|a-z|A-Z]), underscores (_)")
+ROBOT_NAME = re.compile(r"[A-Za-z0-9_]+")
 #: longest robot name: a hostname label (Duckiebots are named by their hostname); the
 #: kit's longest file name for it, the backup's temporary ``.NAME.rejected.yaml.bak.XXXXXXXX.tmp``,
 #: then stays far below every filesystem's 255-byte limit
@@ -86,6 +89,11 @@ _MAX_ASPECT = 5.0        # max(fx/fy, fy/fx)
 
 
 # --------------------------------------------------------------------------- paths
+def is_robot_name(name) -> bool:
+    """True for a Duckiebot's name by the one rule (:data:`ROBOT_NAME`)."""
+    return isinstance(name, str) and ROBOT_NAME.fullmatch(name) is not None
+
+
 def check_robot_name(robot: str) -> str:
     """Validate a robot name for writing its calibration; returns it (``default`` is refused)."""
     if not isinstance(robot, str) or not robot:
@@ -94,11 +102,6 @@ def check_robot_name(robot: str) -> str:
         raise CalibrationFileError(
             f"--robot {robot}: default.yaml is the factory calibration and is never overwritten; pass --robot NAME "
             "(robot names are compared ignoring case)"
-        )
-    if not _ROBOT_NAME.fullmatch(robot) or ".." in robot:
-        raise CalibrationFileError(
-            f"robot name {robot[:80]!r} is not valid: use letters, digits, '_', '-' and '.', without path "
-            "separators or '..' (the name of the Duckiebot, e.g. --robot autobot01)"
         )
     if len(robot) > MAX_ROBOT_NAME:
         raise CalibrationFileError(
@@ -110,6 +113,11 @@ def check_robot_name(robot: str) -> str:
         raise CalibrationFileError(
             f"--robot {robot}: names ending in {REJECTED_SUFFIX!r} are kept for refused calibrations "
             f"(NAME{REJECTED_SUFFIX}.yaml); pass the robot's own name"
+        )
+    if not is_robot_name(robot):
+        raise CalibrationFileError(
+            f"robot name {robot[:80]!r} is not valid: a Duckiebot's name has letters, digits and '_' only (it names "
+            "its ROS topics /NAME/camera_node/...), e.g. --robot autobot01"
         )
     return robot
 

@@ -291,8 +291,8 @@ def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN
 
     The board's squares between the inner corners, in ground order (:func:`~dtscal_lib.boards.order_for_ground`:
     square ``(r, c)`` is the ``r``-th row away from the robot and the ``c``-th column from its right),
-    are dark when ``r + c`` is even on Duckietown's printed pattern (the square outside the
-    near-right inner corner is dark, and a checkerboard alternates). Returns the mean grey level of
+    are light when ``r + c`` is even on Duckietown's printed A3 pattern (the corner square nearest the
+    robot on its right is white, ``duckietown.md``, and a checkerboard alternates). Returns the mean grey level of
     the squares that should be light minus that of those that should be dark: large and positive
     for a board seen the right way round, negative for a mirrored frame (a mirror swaps the
     colours of the squares against their ground positions, a rotation of the board by 180 degrees
@@ -314,8 +314,8 @@ def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN
     vals = cv2.remap(grey, pts[:, 0].reshape(-1, 1), pts[:, 1].reshape(-1, 1), cv2.INTER_LINEAR,
                      borderMode=cv2.BORDER_REPLICATE).reshape(board.rows - 1, board.cols - 1)
     r, c = np.mgrid[0:board.rows - 1, 0:board.cols - 1]
-    dark = (r + c) % 2 == 0
-    return float(vals[~dark].mean() - vals[dark].mean())
+    light = (r + c) % 2 == 0
+    return float(vals[light].mean() - vals[~light].mean())
 
 
 # --------------------------------------------------------------------------- plausibility

@@ -155,11 +155,13 @@ TABLE: tuple[Limit, ...] = (
           "the ground's x and y axes are perpendicular",
           "fleet sample: 88.2-90.0 degrees apart"),
     Limit("mirror_min_contrast", 10.0, "grey levels", "refusal (ground): board seen mirrored",
-          "the checkerboard's squares seen from above must have the printed pattern's colours (the square "
-          "outside the near-right inner corner dark); a mirrored frame swaps them. Below this contrast "
+          "the checkerboard's squares seen from above must have the printed pattern's colours (the corner "
+          "square nearest the robot on its right white); a mirrored frame swaps them. Below this contrast "
           "between light and dark squares the colours are not trusted and nothing is said",
-          "Duckietown's printed pattern (tests/test_ground.py: near-right square dark); the synthetic "
-          "session's rectified floor views show +176 to +181 grey levels, their mirror images -176 to -181"),
+          "Duckietown's printed A3 extrinsic pattern (rev 04/2024; duckietown.md: near-right corner square white, "
+          "near-left black, far-left white, far-right black), as real Duckiebot and Duckietown-simulator frames "
+          "show it: +125 and +254 grey levels the right way round, -125 and -254 mirrored (issue 21); 10 is "
+          "far below both and above the noise of a grey level's mean over 24 squares"),
     # ------------------------------------------------------------------ refusal of a found board (the detector)
     Limit("grid_tolerance_px", 1.0, "px from the quadratic through 8 neighbours", "detector: board refused "
           "'inconsistent_grid' (the corner named)",

@@ -122,10 +122,11 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         ``size_mismatch`` and skipped.
     """
     check_board(board)
-    session = IntrinsicSession(board, model=model, skew=skew, image_size=image_size)
-    src = _open_frames(source_spec, topic, max_seconds, session.ready)
-    session.robot = _robot(robot, src, out_dir is not None)
-    session.stream, session.source = src.is_stream, src.describe()
+    # a live camera stops once the session is ready: the session is made (whole) right after the source
+    src = _open_frames(source_spec, topic, max_seconds, lambda: session.ready())
+    session = IntrinsicSession(board, model=model, skew=skew, image_size=image_size,
+                               robot=_robot(robot, src, out_dir is not None), stream=src.is_stream,
+                               source=src.describe())
     if out_dir is not None:
         check_output_folder(out_dir)
     for frame in (progress(src) if progress else src):

@@ -44,6 +44,7 @@ from .coverage import CoverageTracker
 from .detect import detect_board
 from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError, Reason, opencv_message
 from .findings import Finding
+from .limits import VIEW_OUTLIER_FACTOR
 
 __all__ = ["IntrinsicSession", "ExtrinsicSession", "Offer", "FrameTally", "SizeGroups", "as_findings",
            "robot_from_topic", "robot_name", "camera_name", "intrinsic_file", "calibrate_without_outlier_views",
@@ -51,8 +52,9 @@ __all__ = ["IntrinsicSession", "ExtrinsicSession", "Offer", "FrameTally", "SizeG
 
 #: fewer samples than this cannot give a trustworthy calibration
 MIN_SAMPLES = 3
-#: a view whose own reprojection RMS exceeds this many times the median view's is an outlier
-OUTLIER_FACTOR = 3.0
+#: a view whose own reprojection RMS exceeds this many times the median view's is an outlier (the verdict's
+#: value, one row of :mod:`dtscal_lib.limits`)
+OUTLIER_FACTOR = VIEW_OUTLIER_FACTOR
 #: never drop more than this share of the views as outliers
 MAX_OUTLIER_SHARE = 0.2
 
@@ -62,7 +64,7 @@ def robot_from_topic(topic: str | None) -> str | None:
     """``/autobot01/camera_node/image/compressed`` -> ``autobot01``."""
     if not topic:
         return None
-    m = re.match(r"^/([A-Za-z0-9_]+)/camera_node/", topic)
+    m = re.match(rf"^/({calib_files.ROBOT_NAME.pattern})/camera_node/", topic)
     return m.group(1) if m else None
 
 
@@ -114,6 +116,19 @@ def as_findings(items, kind: str = "intrinsic") -> list[Finding]:
         else:
             out.append(Finding(f"implausible_{kind}", "bad", str(item), ""))
     return out
+
+
+def _gate(session, *, writing: bool, keep_anyway: bool = False) -> tuple[str, list[Finding]]:
+    """The one gate of WRITE and COMMIT: ``(robot, refusals)``, judged before any file or message.
+
+    ``writing=False`` (only judging) accepts a missing robot name; a refused result raises
+    :class:`~dtscal_lib.errors.ImplausibleCalibrationError` unless ``keep_anyway`` (never for COMMIT:
+    its caller passes ``keep_anyway=False``)."""
+    refusals = session.refusals()
+    robot = calib_files.check_robot_name(session.robot) if writing else (session.robot or "camera")
+    if refusals and not keep_anyway:
+        raise _refusal(refusals, session.kind, robot)
+    return robot, refusals
 
 
 def _refusal(refusals, kind: str, robot: str) -> ImplausibleCalibrationError:
@@ -521,10 +536,7 @@ class IntrinsicSession:
             raise DtscalError(f"intrinsic files have one format (classic), not {fmt!r}")
         if self.result is None:
             raise DtscalError("nothing to write yet: CALIBRATE first")
-        refusals = self.refusals()  # judged first: the gate before any file
-        robot = calib_files.check_robot_name(self.robot) if out is not None else (self.robot or "camera")
-        if refusals and not keep_anyway:
-            raise _refusal(refusals, self.kind, robot)
+        robot, refusals = _gate(self, writing=out is not None, keep_anyway=keep_anyway)
         if out is None:
             return None
         self.path = calib_files.save_intrinsics(self.calibration(), out, robot, rejected=bool(refusals))
@@ -539,10 +551,7 @@ class IntrinsicSession:
 
         if self.result is None:
             raise DtscalError("nothing to commit yet: CALIBRATE first")
-        refusals = self.refusals()
-        robot = calib_files.check_robot_name(self.robot)
-        if refusals:
-            raise _refusal(refusals, self.kind, robot)
+        robot, _ = _gate(self, writing=True)
         path = self.path or calib_files.save_intrinsics(self.calibration(), tempfile.mkdtemp(prefix="dtscal-commit-"),
                                                         robot)
         kw = {} if timeout is None else {"timeout": timeout}
@@ -666,10 +675,7 @@ class ExtrinsicSession:
         ``ROBOT.rejected.yaml`` beside the robot's file, in the format asked for.
         """
         res = self.calibrate()
-        refusals = self.refusals()  # judged first: the gate before any file
-        robot = calib_files.check_robot_name(self.robot) if out is not None else (self.robot or "camera")
-        if refusals and not keep_anyway:
-            raise _refusal(refusals, self.kind, robot)
+        robot, refusals = _gate(self, writing=out is not None, keep_anyway=keep_anyway)
         if out is None:
             return None
         intrinsics = self._intrinsics() if fmt == "2" else None
@@ -686,10 +692,7 @@ class ExtrinsicSession:
         from . import robot as robot_link
 
         res = self.calibrate()
-        refusals = self.refusals()
-        robot = calib_files.check_robot_name(self.robot)
-        if refusals:
-            raise _refusal(refusals, self.kind, robot)
+        robot, _ = _gate(self, writing=True)
         path = self.path or calib_files.save_extrinsics_as(
             res.H, tempfile.mkdtemp(prefix="dtscal-commit-"), robot, fmt=fmt,
             intrinsics=self._intrinsics() if fmt == "2" else None)
