@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 __all__ = ["Limit", "TABLE", "LIMITS", "INTRINSIC_LIMITS", "GROUND_CAMERA_LIMITS", "MIN_TILT_SPREAD_DEG",
            "FOCAL_STD_UNDETERMINED", "TILT_BAD_DEG", "TILT_DOUBTFUL_DEG", "MIRROR_MIN_CONTRAST", "GRID_TOLERANCE_PX",
-           "GRID_TOLERANCE_FRACTION", "SMOOTH_GRID_TOLERANCE", "table_text"]
+           "GRID_TOLERANCE_FRACTION", "SMOOTH_GRID_TOLERANCE", "PATTERN_CONTINUES_SHARE", "table_text"]
 
 
 @dataclass(frozen=True)
@@ -162,6 +162,13 @@ TABLE: tuple[Limit, ...] = (
           "near-left black, far-left white, far-right black), as real Duckiebot and Duckietown-simulator frames "
           "show it: +125 and +254 grey levels the right way round, -125 and -254 mirrored (issue 21); 10 is "
           "far below both and above the noise of a grey level's mean over 24 squares"),
+    # ------------------------------------------------------------------ the board's declared size
+    Limit("pattern_continues_share", 0.5, "share of the views where the board is found",
+          "calibration: refused in words, nothing calibrated ('pass --board CxR')",
+          "when the corners go on past the declared board in this share of the views, the board is bigger than "
+          "declared and every view is a sub-grid found at some place on it (a 4x3 declaration gave fx 106991 px)",
+          "OpenCV's 26 real photographs of a 9x6 board (data/real/): declared 9x6, the pattern continues in 0 of "
+          "26 views; declared 8x6 in 23 of 23, 4x3 in 7 of 7, 8x5 in 1 of 1; half is far from both"),
     # ------------------------------------------------------------------ refusal of a found board (the detector)
     Limit("grid_tolerance_px", 1.0, "px from the quadratic through 8 neighbours", "detector: board refused "
           "'inconsistent_grid' (the corner named)",
@@ -197,6 +204,8 @@ MIRROR_MIN_CONTRAST = LIMITS["mirror_min_contrast"].value
 GRID_TOLERANCE_PX = LIMITS["grid_tolerance_px"].value
 GRID_TOLERANCE_FRACTION = LIMITS["grid_tolerance_fraction"].value
 SMOOTH_GRID_TOLERANCE = LIMITS["smooth_grid_tolerance"].value
+#: a board declared smaller than it is (:meth:`dtscal_lib.session.IntrinsicSession.calibrate`)
+PATTERN_CONTINUES_SHARE = LIMITS["pattern_continues_share"].value
 
 #: the verdict's thresholds (:func:`dtscal_lib.quality.assess`)
 FIT_RATIO_DOUBTFUL = LIMITS["fit_ratio_doubtful"].value

@@ -44,7 +44,7 @@ from .coverage import CoverageTracker
 from .detect import detect_board
 from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError, Reason, opencv_message
 from .findings import Finding
-from .limits import VIEW_OUTLIER_FACTOR
+from .limits import PATTERN_CONTINUES_SHARE, VIEW_OUTLIER_FACTOR
 
 __all__ = ["IntrinsicSession", "ExtrinsicSession", "Offer", "FrameTally", "SizeGroups", "as_findings",
            "robot_from_topic", "robot_name", "camera_name", "intrinsic_file", "calibrate_without_outlier_views",
@@ -331,6 +331,8 @@ class IntrinsicSession:
         self._bars: list = []
         self._quality = None
         self._refusals: list[Finding] | None = None
+        #: found detections by the bigger pattern the saddles showed around them (None: the declared size)
+        self._patterns: Counter = Counter()
 
     # ---- frames
     def offer(self, frame) -> Offer:
@@ -362,6 +364,7 @@ class IntrinsicSession:
             return Offer(False, reason, det, img)
         with self.lock:
             group.found += 1
+            self._patterns[det.pattern_seen] += 1
             index = getattr(frame, "index", None)
             if self.stream:
                 added = group.tracker.offer(det, index)
@@ -375,6 +378,24 @@ class IntrinsicSession:
             group.img.append(det.corners)
             group.tally.used += 1
             return Offer(True, None, det, img)
+
+    def _check_board_size(self) -> None:
+        """Refuse, in words, a board declared smaller than it is: in most views the saddles continue past the
+        declared corners as equally strong corners (:attr:`~dtscal_lib.detect.Detection.pattern_seen`), so
+        each view is a sub-grid found somewhere on the board and the calibration would be nonsense."""
+        with self.lock:
+            found = sum(self._patterns.values())
+            bigger = [(n, size) for size, n in self._patterns.items() if size is not None]
+        if not bigger or found < 2:
+            return
+        n, (cols, rows) = max(bigger)
+        if n >= PATTERN_CONTINUES_SHARE * found:
+            raise CalibrationError(
+                f"the pattern continues past the declared corners: in {n} of the {found} views where the declared "
+                f"{self.board.cols}x{self.board.rows} board was found, the board's corners go on beyond it "
+                f"({cols}x{rows} inner corners are seen), so each view would be a part of the board found at some "
+                f"place on it and the calibration meaningless. Nothing was calibrated: pass --board {cols}x{rows} "
+                "(count the inner corners, where four squares meet)", reason=Reason.BOARD_SIZE)
 
     def skipped(self, counts) -> None:
         """Count frames a source skipped itself (corrupt frames of a live camera), by reason."""
@@ -458,6 +479,7 @@ class IntrinsicSession:
                 f"({tally.total} frames; rejected: {dict(tally.rejected)}). Calibration needs at least "
                 f"{MIN_SAMPLES} views at different positions and tilts: check --board/--square, and show the "
                 "whole board (not touching the image border) at several places and angles")
+        self._check_board_size()
         if solver is not None:
             result, dropped = solver.calibrate(obj, img, size, self.model)
         else:

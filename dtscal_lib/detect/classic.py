@@ -3,6 +3,8 @@ otherwise (live and thorough orders), and ROS's full-frame baseline; each raw de
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 
@@ -114,6 +116,11 @@ def _classic(roi: np.ndarray, board: Board, scale: float):
     return (raw.reshape(-1, 2).astype(np.float64) + 0.5) / scale - 0.5
 
 
+def _noted(det: Detection, bigger: tuple[int, int] | None) -> Detection:
+    """The detection, with the bigger pattern the saddles showed around it (:attr:`Detection.pattern_seen`)."""
+    return det if bigger is None else dataclasses.replace(det, pattern_seen=bigger)
+
+
 def _same_box(a, b, tol: float) -> bool:
     return all(abs(p - q) <= tol for p, q in zip(a, b))
 
@@ -145,14 +152,16 @@ def _detect_in_regions(gray: np.ndarray, board: Board, border_margin: float, liv
         if live and any(_same_box(cand.box, t, cand.spacing) for t in tried):
             continue
         tried.append(cand.box)
+        seen: dict = {}
         if live:
             # the board straight from the saddles where they form exactly its grid; the classic
             # detector only where they do not, or where the refinement's checks reject the result
-            lattice = _saddle_lattice(cand, board)
+            lattice = _saddle_lattice(cand, board, seen)
             if lattice is not None:
                 det = _finish(gray, lattice, board, border_margin)
                 if det.found or det.reason == REASON_AT_BORDER:
                     return det
+        bigger = seen.get("pattern")
         if live and cand.spacing >= HALF_SIZE_SPACING:
             # a quick test at half size; the corners then come from the full-size search as in
             # the thorough order (the same start, so the same refined corners), or from the
@@ -162,7 +171,7 @@ def _detect_in_regions(gray: np.ndarray, board: Board, border_margin: float, liv
                 continue
             raw = _classic(roi, board, 1.0)
             raw = half if raw is None else raw
-            return _finish(gray, raw + (x0, y0), board, border_margin)
+            return _noted(_finish(gray, raw + (x0, y0), board, border_margin), bigger)
         else:
             scales = [1.0]
             at_edge = x0 == 0 or y0 == 0 or x1 == w or y1 == h
@@ -171,7 +180,7 @@ def _detect_in_regions(gray: np.ndarray, board: Board, border_margin: float, liv
         for scale in scales:
             raw = _classic(roi, board, scale)
             if raw is not None:
-                return _finish(gray, raw + (x0, y0), board, border_margin)
+                return _noted(_finish(gray, raw + (x0, y0), board, border_margin), bigger)
     return Detection(False, None, REASON_NO_BOARD, board, (w, h))
 
 

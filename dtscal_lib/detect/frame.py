@@ -38,6 +38,9 @@ class Detection:
         For a found-and-rejected board (``"inconsistent_grid"``): which corner (row and column
         of the board's inner-corner grid, from 1) is how far off its neighbours' grid, against
         which tolerance.
+    pattern_seen : (cols, rows) or None
+        The live detector's saddle walk found a bigger grid of equally strong corners than the declared
+        board: the size to pass (``--board CxR``), else None.
     """
 
     found: bool
@@ -46,6 +49,9 @@ class Detection:
     board: Board = field(default=DUCKIETOWN_BOARD)
     image_size: tuple[int, int] = (0, 0)
     detail: str | None = None
+    #: ``(cols, rows)`` of inner corners when the saddles show the pattern continuing past the declared board's
+    #: corners (a bigger board declared too small: a sub-grid was found), else None
+    pattern_seen: tuple[int, int] | None = None
 
     def __bool__(self) -> bool:
         return self.found

@@ -26,7 +26,7 @@ LATTICE_RING_SIDE = 0.6
 LATTICE_RING_STRONG = 0.5
 
 
-def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
+def _saddle_lattice(cand: _Candidate, board: Board, seen: dict | None = None) -> np.ndarray | None:
     """The board's inner corners straight from a cluster's saddles, or None (then the classic detector runs).
 
     Walks the grid from the saddle nearest the cluster's centre: each corner's two local grid vectors
@@ -111,6 +111,8 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     idx[ij[:, 0] + 1, ij[:, 1] + 1] = members
     st = np.zeros(shape)
     st[ij[:, 0] + 1, ij[:, 1] + 1] = strength[members]
+    if seen is not None:
+        seen["pattern"] = _strong_extent(occ, st, board)
     best = None  # (min strength inside, i0, j0, ni, nj)
     for ni, nj in {(board.cols, board.rows), (board.rows, board.cols)}:
         for i0 in range(1, shape[0] - ni):
@@ -144,3 +146,23 @@ def _saddle_lattice(cand: _Candidate, board: Board) -> np.ndarray | None:
     grid = win.T if ni == board.cols else win  # rows x cols, a row-major order of the board
     fine = pts if cand.fine is None else np.asarray(cand.fine, dtype=np.float64)
     return fine[grid.reshape(-1)]
+
+
+def _strong_extent(occ: np.ndarray, st: np.ndarray, board: Board) -> tuple[int, int] | None:
+    """``(cols, rows)`` of the grid of strong saddles the walk found, in the declared board's orientation,
+    when it is bigger than the declared board (the pattern continues past the declared corners); else None.
+
+    A line of the walked grid (a row or a column of indices) belongs to the pattern when at least
+    :data:`LATTICE_RING_SIDE` of its places hold a saddle at least :data:`LATTICE_RING_STRONG` times the median
+    strength: the rule of the ring test, by which a board's printed edge (weaker saddles) does not count.
+    """
+    strong = occ & (st >= LATTICE_RING_STRONG * float(np.median(st[occ])))
+    n = []
+    for axis in (1, 0):
+        count = strong.sum(axis=axis)
+        n.append(int(np.sum(count >= LATTICE_RING_SIDE * max(int(count.max()), 1))))
+    small, big = sorted(n)
+    want_small, want_big = sorted((board.cols, board.rows))
+    if small < want_small or big < want_big or (small, big) == (want_small, want_big):
+        return None
+    return (big, small) if board.cols >= board.rows else (small, big)
