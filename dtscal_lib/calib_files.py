@@ -502,10 +502,26 @@ def load_intrinsics(path) -> IntrinsicCalibration:
         ``K``, unknown distortion model, non-rotation ``R``, malformed ``P``.
     """
     doc, where = _read_yaml(path)
-    return IntrinsicCalibration.from_dict(doc, where)
+    calib = IntrinsicCalibration.from_dict(doc, where)
+    _warn_outside_profile(calib, where)
+    return calib
 
 
-def validate_homography(H, where: str = "homography", *, writing: bool = False) -> np.ndarray:
+def _warn_outside_profile(calib: "IntrinsicCalibration", where: str) -> None:
+    """One line when the file's focal lengths lie far outside those of the robots of its kind (portrait
+    frames: the DD24's, else the Duckiebot's fleet; :mod:`dtscal_lib.profiles`): loaded, but named."""
+    from .profiles import profile_for_image
+
+    prof = profile_for_image(calib.width, calib.height)
+    lo, hi = prof.fx_per_width
+    fx, fy = float(calib.K[0, 0]), float(calib.K[1, 1])
+    if not all(lo <= f / calib.width <= hi for f in (fx, fy)):
+        _warn(where, f"fx {fx:.0f} / fy {fy:.0f} px at {calib.width} px wide lie far outside a {prof.name}'s cameras "
+                     f"({lo * calib.width:.0f}-{hi * calib.width:.0f} px): another camera, or a calibration to redo")
+
+
+def validate_homography(H, where: str = "homography", *, writing: bool = False,
+                        corrupt_rule: bool = True) -> np.ndarray:
     """Check a ground homography (rectified pixel -> ground metres); returns (3, 3) float64.
 
     Refuses non-finite and singular homographies with a :class:`CalibrationFileError` naming
@@ -527,7 +543,9 @@ def validate_homography(H, where: str = "homography", *, writing: bool = False) 
     if sv[0] == 0 or sv[-1] / sv[0] < 1e-14:
         raise _fail(where, "homography is singular (it maps the image onto a line or a point); "
                            "recalibrate the extrinsics")
-    if dt.homography_is_corrupt(H) and not writing:
+    if not corrupt_rule:  # a robot whose camera sees its ground this way (the DD24: dtscal_lib.profiles)
+        pass
+    elif dt.homography_is_corrupt(H) and not writing:
         _warn(where, f"homography has H[1][2] = {H[1, 2]:g} > 0: the camera's image is rotated 180 degrees "
                      "(mounted upside-down), or the corners were mirrored or mis-ordered. Duckietown reads such "
                      "files but its calibration refuses to write them; check the robot's ground projection")
@@ -696,7 +714,7 @@ def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str, *, rejecte
     return _write(_target(intrinsic_path(out_dir, robot), rejected), calib.to_dict())
 
 
-def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
+def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False, corrupt_rule: bool = True) -> Path:
     """Write ``out_dir/camera_extrinsic/<robot>.yaml`` (``homography: [9 floats]``) atomically.
 
     ``H`` (3, 3) maps rectified pixels to ground metres; it is validated (finite,
@@ -705,7 +723,7 @@ def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """
     check_robot_name(robot)
     path = _target(extrinsic_path(out_dir, robot), rejected)
-    H = validate_homography(H, f"{path} (not written)", writing=True)
+    H = validate_homography(H, f"{path} (not written)", writing=True, corrupt_rule=corrupt_rule)
     return _write(path, {"homography": [_plain(v) for v in H.ravel()]})
 
 
@@ -749,7 +767,7 @@ def _v2_frame(calib: IntrinsicCalibration) -> tuple[np.ndarray, np.ndarray]:
     return Kp, np.array([[sx, 0, -tl[0] * sx], [0, sy, -tl[1] * sy], [0, 0, 1.0]])
 
 
-def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
+def extrinsic_to_v2(H, calib: IntrinsicCalibration, corrupt_rule: bool = True) -> np.ndarray:
     """Classic homography (rectified pixel -> ground m) -> the 3x3 matrix of a version-2 file.
 
     Mirrors lib-dt-computer-vision: its tool fits ``H_v`` from normalized image vectors
@@ -758,7 +776,7 @@ def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
     (``camera_specific``: ``Hv2i @ F``). ``Kp`` is the rectified camera (``P[:, :3]``).
     """
     Kp, Hv2i = _v2_frame(calib)
-    Hv = validate_homography(H, "classic homography", writing=True) @ Kp
+    Hv = validate_homography(H, "classic homography", writing=True, corrupt_rule=corrupt_rule) @ Kp
     return np.linalg.inv(Hv2i) @ (Hv / Hv[2, 2])
 
 
@@ -799,14 +817,14 @@ def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | N
 
 
 def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None,
-                       rejected: bool = False) -> Path:
+                       rejected: bool = False, corrupt_rule: bool = True) -> Path:
     """Write ``camera_extrinsic/<robot>.yaml`` in the classic format (default) or as version ``"2"``.
 
     ``H`` is the classic homography; ``fmt="2"`` needs ``intrinsics`` (object or path) and stamps
     ``date`` (default now, ISO 8601). ``rejected`` writes ``<robot>.rejected.yaml`` beside, in either format.
     """
     if fmt == "classic":
-        return save_extrinsics(H, out_dir, robot, rejected=rejected)
+        return save_extrinsics(H, out_dir, robot, rejected=rejected, corrupt_rule=corrupt_rule)
     if fmt != "2":
         raise CalibrationFileError(f"extrinsic format {fmt!r} is unknown; use 'classic' or '2'")
     if intrinsics is None:
@@ -816,7 +834,7 @@ def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsi
     calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
     check_robot_name(robot)
     path = _target(extrinsic_path(out_dir, robot), rejected)
-    F = extrinsic_to_v2(H, calib)
+    F = extrinsic_to_v2(H, calib, corrupt_rule)
     stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
     text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})
     try:

@@ -162,6 +162,26 @@ TABLE: tuple[Limit, ...] = (
           "near-left black, far-left white, far-right black), as real Duckiebot and Duckietown-simulator frames "
           "show it: +125 and +254 grey levels the right way round, -125 and -254 mirrored (issue 21); 10 is "
           "far below both and above the noise of a grey level's mean over 24 squares"),
+    # ------------------------------------------------------------------ robot profiles (dtscal_lib.profiles)
+    Limit("robot_fx_per_width", (0.381, 0.744), "fx / image width", "loading a Duckiebot's intrinsic file: "
+          "a one-line warning",
+          "20 % beyond the fleet's range either way: a file outside is another camera or a wrong calibration "
+          "(fx 1691 / fy 1412 is a 21-degree lens, fx 237 a fisheye's), loaded but named",
+          "duckietown.md: real per-robot intrinsic files have fx 305-397 px at 640 px (0.477-0.620 of the width)"),
+    Limit("dd24_fx_per_width", (0.515, 0.773), "fx / image width", "loading a DD24 intrinsic file: a one-line "
+          "warning",
+          "20 % either way of the one real DD24 file, as for the Duckiebot",
+          "lib-dt-computer-vision assets/extrinsics/dd24/real-world/scenario0/calibration-intrinsic-dd24.yaml: "
+          "fx 154.59 px at 240 px (0.644), kept in data/duckietown/dd24/"),
+    Limit("dd24_camera_height", (0.04, 0.075), "m above the board", "refusal (ground), DD24 profile",
+          "the DD24's camera seen in Duckietown's real photograph, with the Duckiebot's margins (-30 %, +30 %): "
+          "a 17 mm board declared 1.5 times too big or small lands outside",
+          "Duckietown's real DD24 extrinsic photograph (lib-dt-computer-vision assets/extrinsics/dd24/real-world/"
+          "scenario0) with its intrinsic file: camera 5.6 cm above the board (issue 21's measurement)"),
+    Limit("dd24_camera_pitch", (35.0, 60.0), "degrees below the horizon", "refusal (ground), DD24 profile",
+          "the DD24's camera looks steeply down at its board; 12 degrees of margin either side, as the Duckiebot's",
+          "Duckietown's real DD24 extrinsic photograph (scenario0) with its intrinsic file: 47 degrees down "
+          "(issue 21's measurement)"),
     # ------------------------------------------------------------------ the board's declared size
     Limit("pattern_continues_share", 0.5, "share of the views where the board is found",
           "calibration: refused in words, nothing calibrated ('pass --board CxR')",

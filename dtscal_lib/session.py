@@ -594,8 +594,12 @@ class ExtrinsicSession:
     kind = "extrinsic"
 
     def __init__(self, camera: CameraModel | None, board: Board = DUCKIETOWN_BOARD, *, robot: str | None = None,
-                 keep: str = "first", intrinsics=None, source: str = "the frames"):
+                 keep: str = "first", intrinsics=None, source: str = "the frames", profile=None):
+        from .profiles import profile_for
+
         self.board, self.robot, self.keep, self.intrinsics, self.source = board, robot, keep, intrinsics, source
+        #: the robot the board lies in front of (:mod:`dtscal_lib.profiles`; by default the one the board implies)
+        self.profile = profile or profile_for(board)
         #: the camera whose rectified image the homography maps (settable: a new intrinsic calibration)
         self.camera = camera
         self.lock = threading.RLock()
@@ -624,7 +628,7 @@ class ExtrinsicSession:
         if cam is None:
             raise DtscalError("no intrinsic calibration yet: CALIBRATE the intrinsics first")
         try:
-            res = extrinsics_from_image(img, cam, self.board)
+            res = extrinsics_from_image(img, cam, self.board, profile=self.profile)
         except DtscalError as exc:  # counted under the frame's own reason (size, NaN, board, homography)
             reason = exc.reason or Reason.HOMOGRAPHY_FAILED
             self._tally.reject(reason)
@@ -666,7 +670,7 @@ class ExtrinsicSession:
         """The camera's height and pitch recovered from the kept homography."""
         from .ground import camera_pose_from_homography
 
-        return camera_pose_from_homography(self.calibrate().H, self.camera.P[:, :3])
+        return camera_pose_from_homography(self.calibrate().H, self.camera.P[:, :3], self.profile.near_row_x)
 
     def refusals(self) -> list[Finding]:
         """Why the kit does not believe the homography (a camera looking down at the ground ahead?)."""
@@ -674,7 +678,8 @@ class ExtrinsicSession:
 
         res = self.calibrate()
         return as_findings(ground_homography_doubts(res.H, self.camera.P[:, :3], board=self.board,
-                                                    pattern_contrast=getattr(res, "pattern_contrast", None)),
+                                                    pattern_contrast=getattr(res, "pattern_contrast", None),
+                                                    profile=self.profile),
                            self.kind)
 
     @property
@@ -702,7 +707,7 @@ class ExtrinsicSession:
             return None
         intrinsics = self._intrinsics() if fmt == "2" else None
         self.path = calib_files.save_extrinsics_as(res.H, out, robot, fmt=fmt, intrinsics=intrinsics,
-                                                   rejected=bool(refusals))
+                                                   rejected=bool(refusals), corrupt_rule=self.profile.corrupt_rule)
         return self.path
 
     def commit(self, *, master_uri: str | None = None, timeout: float | None = None, url: str | None = None,
@@ -717,6 +722,6 @@ class ExtrinsicSession:
         robot, _ = _gate(self, writing=True)
         path = self.path or calib_files.save_extrinsics_as(
             res.H, tempfile.mkdtemp(prefix="dtscal-commit-"), robot, fmt=fmt,
-            intrinsics=self._intrinsics() if fmt == "2" else None)
+            intrinsics=self._intrinsics() if fmt == "2" else None, corrupt_rule=self.profile.corrupt_rule)
         kw = {} if timeout is None else {"timeout": timeout}
         return robot_link.commit_extrinsics(robot, path, master_uri=master_uri, url=url, **kw)

@@ -77,7 +77,8 @@ class ExtrinsicDriver(LoopDriver):
         #: where the fits happen (the session the command line drives), keeping the best
         self.session = ExtrinsicSession(None, board, keep="best", source=self.spec,
                                         robot=robot_name(self.spec, self.source, robot) or "camera")
-        self.ground_true = ground_points(board)
+        prof = self.session.profile  # the robot the board implies (dtscal_lib.profiles)
+        self.ground_true = ground_points(board, prof.near_row_x, prof.right_column_y)
         self.current = None
         self.reason = ""
         self.bad: Counter = Counter()
