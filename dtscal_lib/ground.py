@@ -263,7 +263,7 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
         raise CalibrationError(
             f"the board ({board.describe()}) was not found in the rectified image; place the robot on the "
             "board as instructed (the board flat in front of the robot, fully in view, its long side across "
-            f"the view, the near row of inner corners {profile.near_row_x} m ahead of the robot's origin), "
+            f"the view, the near row of inner corners {profile.near_row_x} m ahead of {_origin(profile)}), "
             "with even lighting and no glare", reason=det.reason or Reason.NO_BOARD,
         )
     corners = det.corners
@@ -288,6 +288,13 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
                                "the camera must look down at the ground", reason=Reason.HORIZON) from None
     contrast = board_pattern_contrast(rectified, ordered, board) if profile.colours_known else None
     return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground, contrast)
+
+
+def _origin(profile: RobotProfile, short: bool = False) -> str:
+    """What the robot frame's origin is, in words: a Duckiebot's is the midpoint of its wheel axle."""
+    if profile is DUCKIEBOT:
+        return "the axle" if short else "the wheel axle"
+    return "the robot's origin"
 
 
 def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN_BOARD) -> float | None:
@@ -422,8 +429,8 @@ def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD, pattern_c
               f"(at most {lim['abs_yaw_deg']:g})", place)
     if pose["position_m"][0] >= profile.near_row_x:
         doubt("camera_position",
-              f"the camera would stand {pose['position_m'][0]:.3f} m ahead of the robot's origin, on or beyond the "
-              f"board (its near row is at {profile.near_row_x} m)", place)
+              f"the camera would stand {pose['position_m'][0]:.3f} m ahead of {_origin(profile, short=True)}, on or "
+              f"beyond the board (its near row is at {profile.near_row_x} m)", place)
     ratio = max(pose["axis_ratio"], 1 / pose["axis_ratio"])
     if ratio > lim["axis_ratio"] or abs(pose["axis_angle_deg"] - 90) > lim["axis_angle_error_deg"]:
         doubt("not_a_plane_view",
