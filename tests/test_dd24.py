@@ -124,3 +124,25 @@ def test_the_board_implies_the_profile():
 
     assert DD24.pitch_down_deg == LIMITS["dd24_camera_pitch"].value != DUCKIEBOT.pitch_down_deg
     assert DD24.height_m == LIMITS["dd24_camera_height"].value
+
+
+def test_notebook_06_tool_calibrates_the_dd24_frame(tmp_path, frame_dir):
+    """The live tool drives the same session: the DD24 frame gives the same kind of answer as the command line."""
+    from dtscal_lib.boards import Board
+    from dtscal_lib.sources.frame import Frame
+    from dtscal_lib.ui import LiveExtrinsics
+
+    # the live tool takes frames at the intrinsic file's size (240x320); the command line resizes them itself
+    frame = cv2.resize(cv2.imread(str(frame_dir / "dd24.png")), (240, 320), interpolation=cv2.INTER_AREA)
+    for robot_type, written in ((None, True), ("duckiebot", False)):
+        out = tmp_path / str(robot_type)
+        tool = LiveExtrinsics(str(frame_dir), intrinsics=str(INTRINSICS), board=Board(7, 5, SQUARE), robot="dronebot",
+                              calibration_dir=out, autostart=False, robot_type=robot_type)
+        try:
+            tool.loop.step(Frame(0, 0.0, frame, None, "dd24.png"))
+            assert (tool.best is not None) == written, (tool.bad, tool.reason, tool.session.last_error)
+            if written:
+                said = tool.save()
+                assert (out / "camera_extrinsic" / "dronebot.yaml").exists(), said
+        finally:
+            tool.close()
