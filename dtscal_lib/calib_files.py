@@ -56,18 +56,18 @@ import yaml
 
 from . import duckietown as dt
 from . import safe_yaml
-from .camera import CameraModel, as_dist, rectification_maps, undistort_pixels
+from .camera import CameraModel, as_model_dist, rectification_maps, undistort_pixels
 from .errors import CalibrationFileError, CalibrationFileWarning, DtscalError
 
-#: distortion models a file may declare, with their number of coefficients
-SUPPORTED_MODELS = {"plumb_bob": 5}
+#: distortion models a file may declare, with their number of coefficients: ROS's calibrator
+#: (camera_calibration calibrator.py) writes plumb_bob with 5, rational_polynomial with 8 (OpenCV's
+#: CALIB_RATIONAL_MODEL, ``dist_coeffs.flat[:8]``) and equidistant with 4 (``cv2.fisheye.calibrate``)
+SUPPORTED_MODELS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
+#: the coefficient names of each model, in the file's order
+_COEFF_NAMES = {"plumb_bob": "[k1, k2, p1, p2, k3]", "rational_polynomial": "[k1, k2, p1, p2, k3, k4, k5, k6]",
+                "equidistant": "[k1, k2, k3, k4]"}
 #: ROS models recognised but not supported here, with what to do instead
-_UNSUPPORTED_MODELS = {
-    "rational_polynomial": "it has 8 coefficients (k4..k6 in a denominator) that dtscal's camera model "
-                           "does not implement; recalibrate with the default plumb_bob model",
-    "equidistant": "it is the fisheye model, which dtscal does not implement; "
-                   "recalibrate with the default plumb_bob model",
-}
+_UNSUPPORTED_MODELS: dict[str, str] = {}
 #: order of the keys in a ROS CameraInfo YAML (as the shipped default.yaml)
 INTRINSIC_KEYS = ("image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
                   "distortion_coefficients", "rectification_matrix", "projection_matrix")
@@ -249,7 +249,7 @@ def _check_intrinsic_values(width, height, K, model, D, R, P, where: str) -> Non
     n = SUPPORTED_MODELS[model]
     if D.shape != (n,) or not np.all(np.isfinite(D)):
         raise _fail(where, f"distortion_coefficients has {D.size} values; {model} needs {n} "
-                           "[k1, k2, p1, p2, k3]")
+                           f"{_COEFF_NAMES[model]}")
     if R.shape != (3, 3) or not np.all(np.isfinite(R)):
         raise _fail(where, "rectification_matrix must be a finite 3x3 matrix")
     ortho = np.abs(R @ R.T - np.eye(3)).max()
@@ -354,7 +354,8 @@ class IntrinsicCalibration(CameraModel):
 
     @property
     def D(self) -> np.ndarray:
-        """``[k1, k2, p1, p2, k3]``: the camera's ``dist``."""
+        """The camera's ``dist``: ``[k1, k2, p1, p2, k3]`` (plumb_bob), 8 values (rational_polynomial) or 4
+        (equidistant), as the file's ``distortion_coefficients``."""
         return self.dist
 
     @property
@@ -365,12 +366,15 @@ class IntrinsicCalibration(CameraModel):
     def undistort_pixels(self, uv, rectified: bool = True) -> np.ndarray:
         """Distorted pixels -> rectified pixels (``rectified=True``, through ``R`` and ``P``) or normalized."""
         if not rectified:
-            return undistort_pixels(uv, self.K, self.dist)
-        return undistort_pixels(uv, self.K, self.dist, R=self.R, P=self.P)
+            return undistort_pixels(uv, self.K, self.dist, model=self.model)
+        return undistort_pixels(uv, self.K, self.dist, R=self.R, P=self.P, model=self.model)
 
     def rectification_maps(self, new_K=None, size=None):
         return rectification_maps(self.K, self.dist, self.rectified_K if new_K is None else new_K,
-                                  self.size if size is None else size, self.R)
+                                  self.size if size is None else size, self.R, model=self.model)
+
+    def opencv_maps(self, R=None):
+        return super().opencv_maps(self.R if R is None else R)
 
     def camera(self) -> CameraModel:
         """This camera as a plain :class:`~dtscal_lib.camera.CameraModel` (``P`` as stored, no name).
@@ -413,12 +417,14 @@ class IntrinsicCalibration(CameraModel):
     def from_camera(cls, camera: CameraModel, camera_name: str) -> "IntrinsicCalibration":
         """The file content for a calibrated camera: ``R = I``, ``P = camera.P``.
 
-        A ``radial2`` camera is written as ``plumb_bob`` with ``p1 = p2 = k3 = 0``.
+        A ``radial2`` camera is written as ``plumb_bob`` with ``p1 = p2 = k3 = 0``; rational_polynomial
+        and equidistant keep their model and their 8 or 4 coefficients.
         """
         if not isinstance(camera, CameraModel):
             raise CalibrationFileError(f"from_camera needs a CameraModel, got {type(camera).__name__}")
         w, h = camera.size
-        return cls(str(camera_name), int(w), int(h), camera.K, "plumb_bob", as_dist(camera.dist),
+        model = "plumb_bob" if camera.model == "radial2" else camera.model
+        return cls(str(camera_name), int(w), int(h), camera.K, model, as_model_dist(camera.dist, model),
                    np.eye(3), camera.P)
 
     @classmethod
@@ -445,7 +451,7 @@ class IntrinsicCalibration(CameraModel):
         if model not in SUPPORTED_MODELS:
             raise _fail(where, f"distortion_model is {model!r}; expected one of {sorted(SUPPORTED_MODELS)}")
         K = _matrix(doc, "camera_matrix", 3, 3, where)
-        D = _matrix(doc, "distortion_coefficients", 1, SUPPORTED_MODELS[model], where).ravel()
+        D = _matrix(doc, "distortion_coefficients", 1, None, where).ravel()  # its length: checked below, by model
         R = _matrix(doc, "rectification_matrix", 3, 3, where)
         P = _read_P(_matrix(doc, "projection_matrix", 3, 4, where), where)
         _check_intrinsic_values(width, height, K, model, D, R, P, where)

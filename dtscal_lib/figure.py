@@ -1,7 +1,7 @@
 """The kit's one figure convention: pyplot-free matplotlib figures that show themselves.
 
 Used by the library's report (:mod:`dtscal_lib.report`) and by the teaching layer
-(:mod:`dtscal_lib.course`, which re-exports it as ``dtscal_lib.course.figure``).
+(:mod:`dtscal_lib.teaching.course`, which re-exports it as ``dtscal_lib.teaching.course.figure``).
 
 Every course figure is a :class:`CourseFigure` made by :func:`new_figure`: no pyplot, no
 global ``rcParams``, no ``plt.show()``. A notebook shows a figure by leaving it as the cell's

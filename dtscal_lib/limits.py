@@ -219,6 +219,11 @@ TABLE: tuple[Limit, ...] = (
           "true corners fit the cubic to 0.08 of a spacing (1500 random Duckiebot poses 0.18-1.3 m, tilts "
           "up to 57 degrees, through Duckietown's default camera intrinsics, duckietown.md); OpenCV's 26 real "
           "photographs (data/real/) all pass, 2 of 52 of them waved by 5 px are refused"),
+    Limit("cross_validation_ratio", 2.0, "half-set difference / predicted 1-sigma (median of the splits)",
+          "verdict 'doubtful' (calibrate-intrinsics --cross-validate)",
+          "two independent calibrations differ by more than 2 sigma of their difference 5 % of the time; a "
+          "median over random splits above it means the stated uncertainty does not describe these views",
+          "mrcal's half-set ratios on data/real/ (issue 25): 0.64-1.36 inside, 0.82-1.72 at the corners"),
 )
 
 #: every limit by name
@@ -249,6 +254,8 @@ RADIAL_FRACTION = LIMITS["radial_fraction"].value
 NEIGHBOUR_CORRELATION = LIMITS["neighbour_correlation"].value
 SYSTEMATIC_RATIO_BAD = LIMITS["systematic_ratio_bad"].value
 MIN_GOOD_VIEWS = LIMITS["min_good_views"].value
+#: ``--cross-validate``'s threshold (:meth:`dtscal_lib.compare.CrossValidation.finding`)
+CROSS_VALIDATION_RATIO = LIMITS["cross_validation_ratio"].value
 
 #: the refusal limits of an intrinsic calibration (:func:`dtscal_lib.plausibility.intrinsic_doubts`)
 INTRINSIC_LIMITS = {

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .camera import pixel_to_normalized, project_points, undistort_normalized
+from .camera import KIT_SOLVER_MODELS, pixel_to_normalized, project_points, undistort_model
 from .covariance import projection_covariance, rodrigues
 from .errors import CalibrationError, DtscalError
 from .findings import Finding
@@ -243,7 +243,7 @@ def residuals_of(fit, obj_list, img_list) -> list[np.ndarray]:
     R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
     Rv = R[view]
     P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
-    q = project_points(P, np.zeros(3), np.zeros(3), fit.K, fit.dist)
+    q = project_points(P, np.zeros(3), np.zeros(3), fit.K, fit.dist, model=getattr(fit, "model", "plumb_bob"))
     obs = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in img_list])
     return np.split(q - obs, np.cumsum(counts)[:-1])
 
@@ -353,15 +353,7 @@ def _projection_jacobian(P: np.ndarray, K: np.ndarray, dist: np.ndarray, skew: b
 def _rays(result, pix: np.ndarray) -> np.ndarray:
     """Unit rays (M, 3) of pixels; NaN where the distortion model cannot be inverted (far outside the data)."""
     xy = pixel_to_normalized(pix, result.K)
-    try:
-        und = undistort_normalized(xy, result.dist)
-    except DtscalError:
-        und = np.full_like(xy, np.nan)
-        for i, p in enumerate(xy):
-            try:
-                und[i] = undistort_normalized(p[None], result.dist)[0]
-            except DtscalError:
-                pass
+    und = undistort_model(xy, result.dist, getattr(result, "model", "plumb_bob"), strict=False)
     ray = np.column_stack([und, np.ones(len(und))])
     return ray / np.linalg.norm(ray, axis=1, keepdims=True)
 
@@ -586,6 +578,10 @@ def _radial_finding(result, res, noise) -> Finding | None:
 def _richer_model(result) -> str:
     if result.model == "radial2":
         return "use --model plumb_bob (radial2 has no tangential terms)"
+    if result.model == "equidistant":
+        return "use --model rational_polynomial (the fisheye model has no tangential terms), or check the board"
+    if result.model == "rational_polynomial":
+        return "the richest of ROS's models already: check the board's flatness and the detections"
     return "estimate k3 as well (or use a richer lens model)"
 
 
@@ -691,7 +687,8 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     counts = np.zeros((3, 3), dtype=int)
     np.add.at(counts, (ri, ci), 1)
     umap = cov = None
-    if uncertainty:
+    # the projection uncertainty propagates the kit's own solver's normal equations; OpenCV's models have none
+    if uncertainty and result.model in KIT_SOLVER_MODELS:
         try:
             cov = _uncertainty_inputs(result)
             umap = uncertainty_map(result, distance=distance, cov=cov)

@@ -35,6 +35,8 @@ if [ "${1:-}" = "--test" ]; then
   bash scripts/install-mrcal.sh
   echo "setup: the browser for the UI tests" >&2
   bash scripts/install-browser.sh
+  echo "setup: JupyterHub's proxy (npm, into .hub/) for the hub test" >&2
+  bash scripts/install-hub.sh
 else
   echo "setup: installing the kit into .venv (pip lists each package)" >&2
   .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on $QUIET -e .

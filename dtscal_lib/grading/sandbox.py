@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .jobs import as_wire
+
 #: default limits, per check (wall-clock and CPU seconds) and per process (memory)
 WALL_S, CPU_S, MEM_MB, OUTPUT_CHARS = 10.0, 8, 2048, 2000
 #: bounds of the limits an instructor may set (``dtscal grade --wall/--cpu/--mem``):
@@ -198,9 +200,10 @@ def _drain(stream, keep: int, sink: list) -> None:
         size += len(chunk)
 
 
-def run_calls(statements: list[tuple[str, int]], checks: list[dict], *, blocked_paths=(),
+def run_calls(statements: list[tuple[str, int]], checks: list, *, blocked_paths=(),
               mem_mb: int = MEM_MB, output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None) -> SandboxRun:
-    """Run ``checks`` (each ``{"id", "calls": [(name, args)], "wall", "cpu"}``) on the submission.
+    """Run ``checks`` (each a :class:`.jobs.Job`, or ``{"id", "calls": [(name, args)], "wall", "cpu"}``) on the
+    submission.
 
     Parameters
     ----------
@@ -217,6 +220,7 @@ def run_calls(statements: list[tuple[str, int]], checks: list[dict], *, blocked_
     """
     run = SandboxRun()
     skip: set[int] = set()
+    checks = [as_wire(c) for c in checks]  # :class:`.jobs.Job` (the grader's plan) as the child reads it
     todo = list(checks)
     attempts = 0
     while todo and attempts < len(checks) + len(statements) + 2:
