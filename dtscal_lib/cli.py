@@ -170,7 +170,8 @@ def cmd_calibrate_extrinsics(args) -> int:
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
                                out_dir=None if args.no_write else args.out, fmt=args.format,
                                topic=args.topic, progress=_progress(not args.quiet, "frames"),
-                               keep_anyway=args.keep_anyway, max_seconds=args.max_seconds)
+                               keep_anyway=args.keep_anyway, max_seconds=args.max_seconds,
+                               robot_type=args.robot_type)
     committed, failed = _commit(args, run, "extrinsics")
     if args.json:
         _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
@@ -295,6 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")
     common(sp)
     sp.add_argument("--intrinsics", required=True, help="Duckietown intrinsic YAML (camera_intrinsic/NAME.yaml)")
+    sp.add_argument("--robot-type", choices=["duckiebot", "dd24"], default=None,
+                    help="the robot on the board (default: the one the board implies: --square 0.017 is the DD24's)")
     sp.add_argument("--format", choices=["classic", "2"], default="classic",
                     help="extrinsic file: classic flat homography (default) or Duckietown's newer version 2")
     sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "
