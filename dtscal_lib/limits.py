@@ -126,7 +126,7 @@ TABLE: tuple[Limit, ...] = (
     Limit("corner_sigma_bad", 4.0, "px, mean 1-sigma at the image corners", "verdict 'bad' (quality)",
           "four pixels at the corners is a calibration the data does not support",
           "above every real set measured (left 1.61 px); eight synthetic views all in the middle of the image "
-          "reach more (a check, not a source: tests/test_verdict_real.py)"),
+          "reach more (a check of the kit's, not a source)"),
     Limit("view_outlier_factor", 3.0, "view RMS / median view RMS", "verdict (quality): the view is named",
           "one view fitting far worse than the others is a wrong detection or a moved board",
           "chosen, not measured: as the kit's outlier-view rejection of the pipeline"),
