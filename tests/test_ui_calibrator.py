@@ -273,3 +273,33 @@ def test_odd_frames_are_counted_not_raised(filled):
     filled.loop.step(Frame(10_001, 0.0, np.zeros((240, 320, 3), np.uint8), None, "small"))
     assert filled.bad["odd_frame"] == 1 and filled.bad["size_mismatch"] == 1
     assert filled.frames_seen == n and not filled.loop.errors
+
+
+def test_calibrate_stays_disabled_while_a_calibration_runs(filled, monkeypatch):
+    """ROS's cameracalibrator greys CALIBRATE out while it computes; here too: frames that arrive during a
+    calibration (each one ready by ROS's rule) never enable it, and it comes back when the calibration ends."""
+    import threading
+
+    started, release = threading.Event(), threading.Event()
+    real = filled.session.calibrate
+
+    def held(*a, **k):
+        started.set()
+        assert release.wait(120), "the test never let the calibration finish"
+        return real(*a, **k)
+
+    monkeypatch.setattr(filled.session, "calibrate", held)
+    monkeypatch.setattr(filled.background, "prepare", lambda wait=0.0: False)  # solve in this process
+    assert not filled.calibrate_button.disabled
+    filled.calibrate_button.click()
+    try:
+        assert started.wait(60) and filled.calibrating
+        assert filled.calibrate_button.disabled
+        frames = [f for _, f in zip(range(400), open_source(BAG)) if f.ok][-5:]
+        for f in frames:
+            filled.loop.step(f)
+            assert filled.calibrate_button.disabled, "CALIBRATE enabled while a calibration runs"
+    finally:
+        release.set()
+    assert wait_for(lambda: not filled.calibrating, 120)
+    assert wait_for(lambda: not filled.calibrate_button.disabled, 30)  # enabled again once it is done
