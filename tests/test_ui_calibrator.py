@@ -12,6 +12,7 @@ import socket
 import time
 import zipfile
 
+import cv2
 import numpy as np
 import pytest
 
@@ -303,3 +304,36 @@ def test_calibrate_stays_disabled_while_a_calibration_runs(filled, monkeypatch):
         release.set()
     assert wait_for(lambda: not filled.calibrating, 120)
     assert wait_for(lambda: not filled.calibrate_button.disabled, 30)  # enabled again once it is done
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int]:
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None, "not a JPEG a browser can show"
+    return img.shape[1], img.shape[0]
+
+
+def test_views_show_a_placeholder_until_frames_flow_and_an_unreachable_source_could_not_connect():
+    """An empty ipywidgets Image is a broken-image icon in the browser: each view holds a picture from the start
+    (the undistorted preview until CALIBRATE, the live image until the first frame); a source that failed before
+    its first frame reads "could not connect: <reason>", never "source lost", and says so where the image was."""
+    from dtscal_lib.sources.live import LiveStatus
+
+    app = LiveCalibrator(str(BAG), autostart=False)
+    try:
+        for view in (app.image, app.preview):
+            assert view.value[:2] == b"\xff\xd8" and _jpeg_size(view.value) == (640, 480)
+        assert app.preview.value != app.image.value  # each says what it waits for
+        before = app.image.value
+        app._on_status(LiveStatus("error", "nothing listens on port 9 of 127.0.0.1; start the robot", 0))
+        assert "could not connect to" in app.status.value and "nothing listens on port 9" in app.status.value
+        assert "source lost" not in app.status.value
+        assert app.image.value[:2] == b"\xff\xd8" and app.image.value != before
+        # once frames came, losing the source is "source lost" (the samples are kept)
+        f = next(f for f in open_source(BAG) if f.ok)
+        app.loop.step(f)
+        shown = app.image.value
+        app._on_status(LiveStatus("error", "the ROS master stopped answering", 12))
+        assert "source lost" in app.status.value and "could not connect" not in app.status.value
+        assert app.image.value == shown  # the last frame stays on screen
+    finally:
+        app.close()
