@@ -7,6 +7,8 @@
   directly in the class folder, both mixed) with the kit's ``dtscal grade``: every student has a row, and the
   CSV and JSON agree, student by student and function by function, with grading the same notebooks unpacked
   (one folder per student, the layout that graded before issue 23).
+  The kit's Gradescope autograder grades Ada's zip (as uploaded, and as Gradescope unpacks it) to the same
+  scores.
 * The update: a corrected course arrives in the hand-out (its ``notebooks/``, as a ``git pull`` of the
   hand-out's repository brings it); ``bash start.sh --update --no-browser --port P`` carries the student's work
   over and then serves the course: JupyterLab answers on P with the updated workspace; no lock file stays.
@@ -104,29 +106,50 @@ def _handin(course: Path, name: str) -> Path:
     return zpath
 
 
-def _grade(folder: Path, out: Path) -> tuple[dict, dict, str]:
-    """The instructor's `dtscal grade` (this kit) on a class folder: CSV rows by student, JSON by student."""
-    csv_path, json_path = out / "grades.csv", out / "results.json"
+def _grade(folder: Path, out: Path) -> tuple[dict, dict, str, str]:
+    """The instructor's `dtscal grade` (this kit) on a class folder: CSV rows by student, JSON by student, the
+    class report page, and what the command said on stderr."""
+    csv_path, json_path, report = out / "grades.csv", out / "results.json", out / "report"
     res = subprocess.run([sys.executable, "-m", "dtscal_lib.cli", "grade", str(folder), "--jobs", "2", "-q",
-                          "--csv", str(csv_path), "--json", str(json_path)], cwd=ROOT, capture_output=True,
-                         text=True, timeout=600)
+                          "--csv", str(csv_path), "--json", str(json_path), "--report", str(report)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stdout + res.stderr
     with open(csv_path, newline="") as fh:
         rows = {r["student"]: r for r in csv.DictReader(fh)}
     students = json.loads(json_path.read_text())["students"]
-    return rows, students, res.stderr
+    page = (report / "index.html").read_text().replace(str(folder), "CLASS")
+    return rows, students, page, res.stderr
 
 
 def _per_test(entry: dict) -> dict:
     return {t["name"]: (t["score"], t["max_score"]) for t in entry["tests"]}
 
 
-def test_student_hands_in_zips_and_every_class_layout_grades_as_the_unpacked_notebooks(course, tmp_path):
+@pytest.fixture(scope="module")
+def handins(course, tmp_path_factory):
+    """Two students' hand-in zips, written by `bash start.sh --handin` after editing the workspace."""
+    kept = tmp_path_factory.mktemp("uploads")
     ws = course / "workspace"
     _write_code(ws / NB01, "project_points", ADA)
-    ada = shutil.copy(_handin(course, "ada"), tmp_path / "ada.zip")  # what Ada uploaded
+    ada = Path(shutil.copy(_handin(course, "ada"), kept / "ada.zip"))  # what Ada uploaded
     _write_code(ws / NB01, "project_points", BOB)  # the same hand-out, another student's work
-    bob = shutil.copy(_handin(course, "bob"), tmp_path / "bob.zip")
+    bob = Path(shutil.copy(_handin(course, "bob"), kept / "bob.zip"))
+    return {"ada": ada, "bob": bob}
+
+
+@pytest.fixture(scope="module")
+def unpacked_grades(handins, tmp_path_factory):
+    """The class graded from the unpacked notebooks (one folder per student): what every layout must match."""
+    tmp = tmp_path_factory.mktemp("unpacked")
+    for student, zpath in handins.items():
+        with zipfile.ZipFile(zpath) as z:
+            z.extractall(tmp / "class" / student)
+    return _grade(tmp / "class", tmp)
+
+
+def test_student_hands_in_zips_and_every_class_layout_grades_as_the_unpacked_notebooks(handins, unpacked_grades,
+                                                                                       tmp_path):
+    ada, bob = handins["ada"], handins["bob"]
 
     def layout(name: str, where: dict) -> Path:
         root = tmp_path / name
@@ -136,11 +159,7 @@ def test_student_hands_in_zips_and_every_class_layout_grades_as_the_unpacked_not
             shutil.copy(zpath, target / f"{student}.zip")
         return root
 
-    unpacked = tmp_path / "unpacked"
-    for student, zpath in (("ada", ada), ("bob", bob)):
-        with zipfile.ZipFile(zpath) as z:
-            z.extractall(unpacked / student)
-    want_rows, want_json, _ = _grade(unpacked, tmp_path)
+    want_rows, want_json, want_page, _ = unpacked_grades
     assert set(want_rows) == {"ada", "bob"}
     # independent of the grader's arithmetic: correct code earns all of project_points, the mistake loses points
     ada_pp = {k: v for k, v in _per_test(want_json["ada"]).items() if "project_points" in k}
@@ -157,7 +176,7 @@ def test_student_hands_in_zips_and_every_class_layout_grades_as_the_unpacked_not
     for name, where in layouts.items():
         out = tmp_path / f"out-{len(name)}"
         out.mkdir()
-        rows, students, stderr = _grade(layout(name.replace(" ", "_").replace("'", ""), where), out)
+        rows, students, page, stderr = _grade(layout(name.replace(" ", "_").replace("'", ""), where), out)
         assert set(rows) == {"ada", "bob"}, (name, rows.keys(), stderr)  # nobody dropped
         for s in ("ada", "bob"):
             got = {k: v for k, v in rows[s].items() if k != "notes"}
@@ -166,6 +185,38 @@ def test_student_hands_in_zips_and_every_class_layout_grades_as_the_unpacked_not
             assert _per_test(students[s]) == _per_test(want_json[s]), (name, s)
             assert students[s]["score"] == want_json[s]["score"]
             assert "not graded" not in rows[s]["notes"], (name, s, rows[s]["notes"])
+        assert page == want_page, name  # the class report: the same distributions and named mistakes
+
+
+@pytest.mark.parametrize("upload", ["the zip as uploaded", "the zip unpacked by Gradescope"])
+def test_the_gradescope_bundle_grades_a_handin_as_the_class_grading_does(handins, unpacked_grades, tmp_path,
+                                                                        upload):
+    """The kit's Gradescope autograder, run as Gradescope runs it (its `run_autograder` over
+    /autograder/submission), on Ada's hand-in: the same score, test by test, as `dtscal grade` gave Ada in the
+    class, and no file reported as not graded."""
+    bundle = tmp_path / "autograder.zip"
+    res = subprocess.run([sys.executable, "-m", "dtscal_lib.cli", "grade", "--gradescope-bundle", str(bundle)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    root = tmp_path / "autograder"
+    with zipfile.ZipFile(bundle) as z:
+        z.extractall(root / "source")
+    sub = root / "submission"
+    sub.mkdir()
+    if upload == "the zip as uploaded":
+        shutil.copy(handins["ada"], sub / "ada.zip")
+    else:
+        with zipfile.ZipFile(handins["ada"]) as z:
+            z.extractall(sub)
+    env = dict(os.environ, DTSCAL_AUTOGRADER_ROOT=str(root), DTSCAL_PYTHON=sys.executable,
+               PYTHONPATH=str(root / "source"))
+    run = subprocess.run(["bash", str(root / "source" / "run_autograder")], env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    got = json.loads((root / "results" / "results.json").read_text())
+    want = unpacked_grades[1]["ada"]
+    assert got["score"] == want["score"] and _per_test(got) == _per_test(want)
+    assert "not graded" not in got.get("output", ""), got.get("output")
 
 
 def test_update_then_the_course_opens(course, tmp_path):
