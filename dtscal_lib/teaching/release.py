@@ -99,10 +99,10 @@ On a machine with Python 3.11 or newer:
 bash start.sh
 ```
 
-The first run makes a Python environment in `.venv/` and installs the course into it (a few minutes;
-it prints each step and pip shows each package); then JupyterLab opens at notebook 01. Later runs start
-in seconds. Options: `bash start.sh --no-browser` prints the address to open instead; `--port 8890`
-picks another port.
+The first run makes a Python environment in `.venv/` and installs the course into it (under a minute
+with a fast connection; it prints each step and the installer, uv or else pip, lists each package); then
+JupyterLab opens at notebook 01. Later runs start in seconds. Options: `bash start.sh --no-browser` prints
+the address to open instead; `--port 8890` picks another port; `--setup-only` installs and stops.
 
 ## Where you work
 
@@ -128,7 +128,8 @@ Your instructor says which of the two:
 ## A new version of the course
 
 If your instructor hands out a corrected course, unpack it into a new folder, copy your old
-`workspace/` folder into it, and run `bash start.sh --update`. Every notebook is updated cell by cell:
+`workspace/` folder into it, and run `bash start.sh --update` (it then opens the course; the options above
+work with it). Every notebook is updated cell by cell:
 the course's corrections arrive, and your code, your own cells and the outputs of unchanged cells stay.
 Code that has no place in the new notebooks (a function you renamed, say) is kept in a cell marked
 `KEPT BY THE UPDATE`; your previous notebooks are kept in `workspace/backups/`. If the update cannot
