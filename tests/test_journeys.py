@@ -160,10 +160,14 @@ def test_student_hands_in_zips_and_every_class_layout_grades_as_the_unpacked_not
 
     def layout(name: str, where: dict) -> Path:
         root = tmp_path / name
-        for student, (zpath, in_folder) in where.items():
-            target = root / student if in_folder else root
+        for student, (zpath, how) in where.items():
+            target = root / student if how != "top" else root
             target.mkdir(parents=True, exist_ok=True)
-            shutil.copy(zpath, target / f"{student}.zip")
+            if how == "unpacked":
+                with zipfile.ZipFile(zpath) as z:
+                    z.extractall(target)
+            else:
+                shutil.copy(zpath, target / f"{student}.zip")
         return root
 
     want_rows, want_json, want_page, _ = unpacked_grades
@@ -176,12 +180,13 @@ def test_student_hands_in_zips_and_every_class_layout_grades_as_the_unpacked_not
     assert float(want_rows["ada"]["project_points"]) > float(want_rows["bob"]["project_points"])
 
     layouts = {
-        "zip in the student's folder": {"ada": (ada, True), "bob": (bob, True)},
-        "zip directly in the class folder": {"ada": (ada, False), "bob": (bob, False)},
-        "mixed": {"ada": (ada, True), "bob": (bob, False)},
+        "zip in the student's folder": {"ada": (ada, "folder"), "bob": (bob, "folder")},
+        "zip directly in the class folder": {"ada": (ada, "top"), "bob": (bob, "top")},
+        "zips mixed": {"ada": (ada, "folder"), "bob": (bob, "top")},
+        "a zip and an unpacked folder": {"ada": (ada, "top"), "bob": (bob, "unpacked")},
     }
     for name, where in layouts.items():
-        out = tmp_path / f"out-{len(name)}"
+        out = tmp_path / f"out-{name.replace(' ', '_').replace(chr(39), '')}"
         out.mkdir()
         rows, students, page, stderr = _grade(layout(name.replace(" ", "_").replace("'", ""), where), out)
         assert set(rows) == {"ada", "bob"}, (name, rows.keys(), stderr)  # nobody dropped
