@@ -84,9 +84,10 @@ def test_handout_is_a_git_repository_that_carries_the_workspace(handout, tmp_pat
     import shutil
 
     repo = tmp_path / "repo"
-    # the hand-out as handed out: what another test's start of it made there (.venv, workspace/, hand-ins) left out
-    shutil.copytree(handout, repo, ignore=lambda d, names: [n for n in names if Path(d) == handout
-                                                            and n in (".venv", "workspace", "handin")])
+    # the hand-out as handed out: what another test's start of it made there (.venv, the editable install's
+    # egg-info, workspace/, hand-ins) left out
+    shutil.copytree(handout, repo, ignore=lambda d, names: [n for n in names if Path(d) == handout and (
+        n in (".venv", "workspace", "handin") or n.endswith(".egg-info"))])
     git = ["git", "-c", f"safe.directory={repo}"]
     log = subprocess.run([*git, "log", "--format=%an <%ae>|%s"], cwd=repo, capture_output=True, text=True)
     assert log.returncode == 0, log.stderr  # a repository, with a history
