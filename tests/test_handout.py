@@ -200,3 +200,25 @@ def test_start_sh_shows_progress_and_hands_in():
     assert 'exec .venv/bin/dtscal handin "$@"' in text
     assert '"--setup-only"' in text and '"--no-open"' in text
     assert subprocess.run(["bash", "-n"], input=text, text=True).returncode == 0
+
+
+def test_start_sh_gives_uv_the_settings_pip_has(tmp_path):
+    """uv does not read pip's configuration; start.sh hands pip's settings to uv, so that both install from the same
+    places: uv's documented variables (docs.astral.sh/uv, "Environment variables") for pip's options, and pip's rule
+    of taking the best version over every index (UV_INDEX_STRATEGY=unsafe-best-match)."""
+    code = rel.START_SH.split("<<'PY'\n", 1)[1].split("\nPY\n", 1)[0]  # the settings reader start.sh runs
+    env = {"PATH": os.environ["PATH"], "HOME": str(tmp_path), "PIP_CONFIG_FILE": os.devnull,
+           "PIP_INDEX_URL": "https://mirror.example/simple",
+           "PIP_EXTRA_INDEX_URL": "https://a.example/simple https://b.example/simple",
+           "PIP_FIND_LINKS": "/wheels/one /wheels/two", "PIP_CONSTRAINT": "/etc/course-constraints.txt",
+           "PIP_TRUSTED_HOST": "mirror.example", "PIP_DEFAULT_TIMEOUT": "90"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    exports = dict(line.removeprefix("export ").split("=", 1) for line in out.splitlines())
+    assert exports == {"UV_INDEX_URL": "https://mirror.example/simple",
+                       "UV_EXTRA_INDEX_URL": "'https://a.example/simple https://b.example/simple'",
+                       "UV_FIND_LINKS": "/wheels/one,/wheels/two", "UV_CONSTRAINT": "/etc/course-constraints.txt",
+                       "UV_INSECURE_HOST": "mirror.example", "UV_HTTP_TIMEOUT": "90",
+                       "UV_INDEX_STRATEGY": "unsafe-best-match"}
+    env = {k: v for k, v in env.items() if not k.startswith("PIP_") or k == "PIP_CONFIG_FILE"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.splitlines() == ["export UV_INDEX_STRATEGY=unsafe-best-match"]  # no setting: uv's defaults (PyPI)

@@ -160,6 +160,18 @@ set -euo pipefail
 cd "$(dirname "$0")"
 PYTHON="${PYTHON:-python3}"
 say() { echo "start.sh: $*" >&2; }
+ticking() {  # ticking WHAT COMMAND...: run COMMAND, saying every 5 s that WHAT goes on (never silent for long)
+  local what=$1 rc=0 tick
+  shift
+  (n=0; while sleep 5; do n=$((n + 5)); say "... $what ($n s)"; done) &
+  tick=$!
+  trap 'kill "$tick" 2>/dev/null' EXIT
+  "$@" || rc=$?
+  kill "$tick" 2>/dev/null || true
+  wait "$tick" 2>/dev/null || true
+  trap - EXIT
+  return "$rc"
+}
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
   say "needs Python 3.11 or newer; install it, or run: PYTHON=/path/to/python3.11 bash start.sh"
   exit 2
@@ -176,9 +188,12 @@ for line in out.splitlines():  # section.key='value'; the environment (:env:) an
     if value and rank >= conf.get(name, (0, ""))[0]:
         conf[name] = (rank, value.strip("'\\""))
 uv = {"index-url": "UV_INDEX_URL", "extra-index-url": "UV_EXTRA_INDEX_URL", "find-links": "UV_FIND_LINKS",
-      "constraint": "UV_CONSTRAINT", "cert": "SSL_CERT_FILE"}
+      "constraint": "UV_CONSTRAINT", "cert": "SSL_CERT_FILE", "trusted-host": "UV_INSECURE_HOST",
+      "timeout": "UV_HTTP_TIMEOUT", "default-timeout": "UV_HTTP_TIMEOUT"}
 for name, (_rank, value) in conf.items():
-    if name in uv:
+    if name == "no-index" and value.lower() in ("1", "true", "yes", "on"):
+        print('set -- "$@" --no-index')  # uv has no variable for it: the flag, after uv's other arguments
+    elif name in uv:
         value = ",".join(value.split()) if name == "find-links" else value
         print(f"export {uv[name]}={shlex.quote(value)}")
 print("export UV_INDEX_STRATEGY=unsafe-best-match")  # pip's rule: the best version over every index
@@ -190,16 +205,16 @@ if ! .venv/bin/python -c 'import dtscal_lib, jupyterlab' 2>/dev/null; then
   say "first run: installing the course into .venv (3 steps; under a minute with the packages cached)"
   if [ ! -x .venv/bin/python ]; then
     say "[1/3] making the course's Python environment in .venv"
-    "$PYTHON" -m venv .venv
+    ticking "making .venv" "$PYTHON" -m venv .venv
   else
     say "[1/3] .venv is there; completing it"
   fi
   installed=""
   if [ "${DTSCAL_INSTALLER:-uv}" = uv ]; then
     say "[2/3] getting the uv installer from PyPI into .venv (pip)"
-    if .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on uv; then
+    if ticking "getting uv" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on uv; then
       say "[3/3] installing the course, JupyterLab and OpenCV with uv (it lists each package)"
-      if uv_env pip install --python .venv/bin/python -e .; then
+      if ticking "installing with uv" uv_env pip install --python .venv/bin/python -e .; then
         installed=uv
       else
         say "uv could not install the course; trying pip instead"
@@ -210,9 +225,9 @@ if ! .venv/bin/python -c 'import dtscal_lib, jupyterlab' 2>/dev/null; then
   fi
   if [ -z "$installed" ]; then
     say "[2/3] updating pip"
-    .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on --upgrade pip
+    ticking "updating pip" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on --upgrade pip
     say "[3/3] installing the course, JupyterLab and OpenCV with pip (pip lists each package)"
-    .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on -e .
+    ticking "installing with pip" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on -e .
   fi
   say "installed"
 fi
@@ -224,7 +239,6 @@ args=()
 for a in "$@"; do
   if [ "$a" = "--setup-only" ]; then args+=("--no-open"); else args+=("$a"); fi
 done
-say "starting the course"
 exec .venv/bin/dtscal course ${args[@]+"${args[@]}"}
 """
 
