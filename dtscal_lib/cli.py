@@ -182,6 +182,9 @@ def cmd_calibrate_extrinsics(args) -> int:
         x, y = run.image_center_ground
         print(f"  image centre -> ground ({x:.3f}, {y:.3f}) m; corner residuals max "
               f"{run.residual_mm.max():.2f} mm")
+        fr = run.frames()
+        print(f"  frames: {fr['total']} read" + (f" of {fr['in_source']} (the first usable one is Duckietown's; "
+              f"{fr['not_read']} not read)" if "in_source" in fr else "") + f", {fr['used']} used")
         if run.camera_pose:
             print(f"  camera {run.camera_pose['height_m']:.3f} m above the ground, looking "
                   f"{run.camera_pose['pitch_down_deg']:.1f} degrees down")

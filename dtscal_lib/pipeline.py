@@ -156,6 +156,18 @@ class ExtrinsicRun:
     doubts: list = field(default_factory=list)
     #: the session that made it (write in another format, commit)
     session: ExtrinsicSession | None = field(default=None, repr=False)
+    #: frames the source holds (None for a live camera): the run reads only up to the first usable one
+    frames_in_source: int | None = None
+
+    def frames(self) -> dict:
+        """The frame counts: ``total`` read, ``used``, ``rejected`` by reason and, for a recording,
+        ``in_source`` and ``not_read`` (the frames after the first usable one, which Duckietown's procedure
+        does not need), so that ``total + not_read == in_source``."""
+        out = self.tally.to_dict()
+        if self.frames_in_source is not None:
+            out["in_source"] = self.frames_in_source
+            out["not_read"] = max(0, self.frames_in_source - self.tally.total)
+        return out
 
     def to_dict(self) -> dict:
         return {
@@ -165,7 +177,7 @@ class ExtrinsicRun:
             "frame_index": self.frame_index,
             "image_center_ground_m": [float(v) for v in self.image_center_ground],
             "corner_residual_mm": {"max": float(np.max(self.residual_mm)), "mean": float(np.mean(self.residual_mm))},
-            "frames": self.tally.to_dict(),
+            "frames": self.frames(),
             "output": str(self.path) if self.path else None,
             "camera_pose": dict(self.camera_pose),
             "doubts": [str(d) for d in self.doubts],
@@ -200,13 +212,17 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
                                profile=profile_for(board, robot_type))
     if out_dir is not None:
         check_output_folder(out_dir)
+    try:
+        in_source = len(src)
+    except TypeError:  # a live camera: no end
+        in_source = None
     for frame in (progress(src) if progress else src):
         if session.offer(frame).added:
             break
     res = session.calibrate()
     run = ExtrinsicRun(session.robot, res.H, session.best_frame, session.tally(), np.asarray(res.residual_mm),
                        np.asarray(res.image_center_ground), session.source, camera_pose=session.camera_pose(),
-                       session=session)
+                       session=session, frames_in_source=in_source)
     run.path = session.write(out_dir, keep_anyway, fmt)
     run.doubts = session.doubts
     return run
