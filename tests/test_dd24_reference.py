@@ -102,6 +102,11 @@ def test_the_kit_reads_the_reference_as_duckietown_wrote_it(tmp_path):
     path = calib_files.save_extrinsics_as(H, tmp_path, "dronebot", fmt="2", intrinsics=calib)
     assert yaml.safe_load(path.read_text())["format"] == "resolution-independent"
     np.testing.assert_allclose(calib_files.read_extrinsic_file(path, calib)[0], H, rtol=1e-9, atol=1e-12)
+    # the kit's files from before it wrote the key (its header names it) still read the same way
+    older = tmp_path / "older.yaml"
+    older.write_text(path.read_text().replace("format: resolution-independent\n", ""))
+    assert "format" not in yaml.safe_load(older.read_text())
+    np.testing.assert_allclose(calib_files.read_extrinsic_file(older, calib)[0], H, rtol=1e-9, atol=1e-12)
     path.write_text(path.read_text().replace("resolution-independent", "resolution-dependent"))
     with pytest.raises(calib_files.CalibrationFileError, match="format"):
         calib_files.read_extrinsic_file(path, calib)
