@@ -848,8 +848,10 @@ def read_extrinsic_file(path, intrinsics=None, reading: str | None = None) -> tu
     if str(doc["version"]).strip() != "2":
         raise _fail(where, f"extrinsic file version {doc['version']!r} is not supported (classic or '2')")
     rows = doc.get("homography")
+    if isinstance(rows, list) and len(rows) == 9 and not any(isinstance(r, (list, dict)) for r in rows):
+        rows = [rows[0:3], rows[3:6], rows[6:9]]  # 9 numbers in a row: Duckietown's reader reshapes them (3, 3)
     if not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)):
-        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers")
+        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers (or 9 numbers)")
     F = [[_number(v, where, f"homography[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
     if intrinsics is None:
         raise _fail(where, "is a version-2 (resolution-independent) file; pass the robot's intrinsic file "

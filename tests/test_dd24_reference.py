@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import cv2
@@ -167,3 +168,27 @@ def test_a_frame_at_the_reference_pose_calibrates_and_agrees_with_the_reference(
     err_mm = 1000 * np.linalg.norm(kit[:, :2] / kit[:, 2:] - board_frame_to_robot(ref[:, :2] / ref[:, 2:]), axis=1)
     print(f"kit vs reference: corners {err_mm[:COLS * ROWS].max():.2f} mm, board {err_mm.max():.2f} mm")
     assert err_mm.max() < BOUND_MM, (err_mm[:COLS * ROWS].max(), err_mm.max())
+
+
+def test_duckietowns_other_dd24_file_holds_the_same_kind_of_matrix_though_it_says_otherwise():
+    """``scenario1/homography.yaml`` carries ``format: resolution-independent`` (and the placeholder date of
+    ``save_to_http``'s docstring), yet it too is a rigid view only when read as normalized vectors -> ground:
+    its camera (``scenario1/calibration-intrinsic-dd24.yaml``, 480x640, the 240x320 file's K doubled) 6.2 cm above
+    the board, 49 degrees down. The kit cannot tell from the file; ``reading="vector"`` says it."""
+    from dtscal_lib import calib_files
+
+    _, K, D, (w, h) = reference()
+    K2 = K * 2
+    K2[2, 2] = 1.0
+    calib = calib_files.IntrinsicCalibration("dd24_480_640", 2 * w, 2 * h, K2, "plumb_bob", D, np.eye(3),
+                                             np.column_stack([K2, np.zeros(3)]))
+    path = REF / "scenario1-homography.yaml"
+    rigid = {}
+    for reading in (None, "vector"):
+        with warnings.catch_warnings():  # H[1][2] > 0: the Duckiebot's sign rule; this ground is the board's frame
+            warnings.simplefilter("ignore", calib_files.CalibrationFileWarning)
+            H, fmt, _ = calib_files.read_extrinsic_file(path, calib, reading=reading)
+        rigid[reading] = pose(board_to_camera(H @ K2))  # back to normalized vectors -> ground
+    height, pitch, ratio, cosine = rigid["vector"]
+    assert abs(ratio - 1) < 0.05 and cosine < 0.03 and 0.05 < height < 0.07 and 45 < pitch < 52, rigid["vector"]
+    assert abs(rigid[None][2] - 1) > 0.3, rigid[None]  # the file's own word: no rigid view
