@@ -786,24 +786,61 @@ def extrinsic_to_v2(H, calib: IntrinsicCalibration, corrupt_rule: bool = True) -
     return np.linalg.inv(Hv2i) @ (Hv / Hv[2, 2])
 
 
-def extrinsic_from_v2(F, calib: IntrinsicCalibration, where: str = "version-2 homography") -> np.ndarray:
-    """The 3x3 matrix of a version-2 file -> classic homography (rectified pixel -> ground m), ``H[2,2] = 1``."""
+#: how a version-2 matrix is read: ``"independent"`` (Duckietown's current format, ``camera_specific``) or
+#: ``"vector"`` (the matrix maps the camera's normalized image vectors to the ground, as Duckietown's DD24
+#: reference ``assets/extrinsics/dd24/real-world/scenario0/homography.yaml`` stores it: see :func:`v2_reading`)
+V2_READINGS = ("independent", "vector")
+
+
+def extrinsic_from_v2(F, calib: IntrinsicCalibration, where: str = "version-2 homography",
+                      reading: str = "independent") -> np.ndarray:
+    """The 3x3 matrix of a version-2 file -> classic homography (rectified pixel -> ground m), ``H[2,2] = 1``.
+
+    ``reading="vector"``: ``F`` maps normalized image vectors ``pixel2vector(p) = K^-1 p`` of ``calib``'s
+    camera (lib-dt-computer-vision's ``CameraModel.pixel2vector`` uses ``K``) to the ground, so ``H = F K^-1``.
+    """
     F = np.asarray(F, dtype=np.float64)
     if F.size != 9 or not np.all(np.isfinite(F)):
         raise _fail(where, "a version-2 homography is 3 rows of 3 finite numbers")
+    if reading not in V2_READINGS:
+        raise _fail(where, f"unknown version-2 reading {reading!r}; use one of {', '.join(V2_READINGS)}")
     Kp, Hv2i = _v2_frame(calib)
-    H = (Hv2i @ F.reshape(3, 3)) @ np.linalg.inv(Kp)
+    if reading == "vector":
+        H = F.reshape(3, 3) @ np.linalg.inv(np.array(calib.K, dtype=np.float64))
+    else:
+        H = (Hv2i @ F.reshape(3, 3)) @ np.linalg.inv(Kp)
     if abs(H[2, 2]) < 1e-12:
         raise _fail(where, "maps the image to points at infinity; recalibrate the extrinsics")
     return validate_homography(H / H[2, 2], where)
 
 
-def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | None]:
+def v2_reading(doc: dict, text: str, where: str) -> str:
+    """Which matrix a version-2 file holds (see ``docs/robot.md``, "Duckietown's second robot").
+
+    * ``format: resolution-independent``: Duckietown's current writer (lib-dt-computer-vision
+      ``camera/homography.py``, ``HomographyToolkit.save_to_disk``), read with ``camera_specific``.
+    * no ``format`` key, written by dtscal (its header says so): the kit's own files before it wrote the key,
+      the same matrix.
+    * no ``format`` key otherwise: an older Duckietown file. Its DD24 reference (``scenario0/homography.yaml``,
+      2024-08-18) was written by ``notebooks/22-extrinsics-calibration-dd24.ipynb`` straight from
+      ``estimate_homography``: normalized image vectors of the 240x320 camera -> ground (the notebook prints the
+      same nine numbers). Duckietown's current ``load_from_disk`` refuses such a file (no ``format``).
+    """
+    fmt = doc.get("format")
+    if fmt is not None:
+        if str(fmt).strip().lower() != "resolution-independent":
+            raise _fail(where, f"version-2 format {fmt!r} is not supported (resolution-independent)")
+        return "independent"
+    return "independent" if "written by dtscal" in text else "vector"
+
+
+def read_extrinsic_file(path, intrinsics=None, reading: str | None = None) -> tuple[np.ndarray, str, str | None]:
     """Read a classic or version-2 ``camera_extrinsic`` file as ``(H, format, date)``.
 
     ``H`` is always the classic homography (rectified pixel -> ground metres); ``format`` is
     ``"classic"`` or ``"2"``; ``date`` the file's ISO date (None for classic). A version-2 file
-    needs ``intrinsics`` (an :class:`IntrinsicCalibration` or the path of one) to be converted.
+    needs ``intrinsics`` (an :class:`IntrinsicCalibration` or the path of one) to be converted;
+    ``reading`` (one of :data:`V2_READINGS`) overrides what :func:`v2_reading` infers from the file.
     """
     doc, where = _read_yaml(path)
     if "version" not in doc:
@@ -811,15 +848,19 @@ def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | N
     if str(doc["version"]).strip() != "2":
         raise _fail(where, f"extrinsic file version {doc['version']!r} is not supported (classic or '2')")
     rows = doc.get("homography")
+    if isinstance(rows, list) and len(rows) == 9 and not any(isinstance(r, (list, dict)) for r in rows):
+        rows = [rows[0:3], rows[3:6], rows[6:9]]  # 9 numbers in a row: Duckietown's reader reshapes them (3, 3)
     if not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)):
-        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers")
+        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers (or 9 numbers)")
     F = [[_number(v, where, f"homography[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
     if intrinsics is None:
         raise _fail(where, "is a version-2 (resolution-independent) file; pass the robot's intrinsic file "
                            "to convert it (--intrinsics camera_intrinsic/ROBOT.yaml)")
     calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
     date = doc.get("date")
-    return extrinsic_from_v2(F, calib, where), "2", None if date is None else str(date)
+    if reading is None:
+        reading = v2_reading(doc, Path(path).read_text(encoding="utf-8", errors="replace"), where)
+    return extrinsic_from_v2(F, calib, where, reading), "2", None if date is None else str(date)
 
 
 def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None,
@@ -842,7 +883,9 @@ def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsi
     path = _target(extrinsic_path(out_dir, robot), rejected)
     F = extrinsic_to_v2(H, calib, corrupt_rule)
     stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
-    text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})
+    # "format" as Duckietown's save_to_disk writes it: its load_from_disk refuses a version-2 file without it
+    text = V2_HEADER + "\n" + _dump({"version": "2", "format": "resolution-independent", "date": stamp,
+                                     "homography": [[float(v) for v in r] for r in F]})
     try:
         return _atomic_write(path, text)
     except OSError as e:

@@ -10,8 +10,8 @@ pose through the reference intrinsics scaled to the photographs' 480x640, distor
 from ``cv2.undistortPoints`` with the file's own K and D). The kit resizes it to the file's 240x320, rectifies,
 detects and fits: exit 0, and the ground under the board's corners within 1.5 mm of the construction. The same
 frame judged as a Duckiebot's (``--robot-type duckiebot``) is refused: a DD24's camera is no Duckiebot's.
-Not done here: agreement with Duckietown's reference ``homography.yaml`` (kept in ``data/duckietown/dd24/``),
-whose ground frame the kit does not yet reproduce.
+Agreement with Duckietown's reference ``homography.yaml`` (kept in ``data/duckietown/dd24/``; its ground frame is
+the board's own): ``tests/test_dd24_reference.py``.
 """
 
 from __future__ import annotations
