@@ -56,6 +56,11 @@ def cmd_grade(args) -> int:
     for student in r.students:  # also in the CSV and JSON, next to the student's grades
         for n in r.notes.get(student, []):
             print(f"{student}: {n}", file=sys.stderr)
+    from .sandbox import GRADER_ERROR, barriers
+
+    held = barriers()  # which barriers hold around each submission on this machine (also in results.json)
+    print(f"sandbox: {held['mode']}" + ("" if held["mode"] == "bubblewrap" else f" -- {held['filesystem']}"),
+          file=sys.stderr)
     results = grade_all(r.items, material, jobs=args.jobs, progress=not args.quiet,
                         wall_s=args.wall, cpu_s=args.cpu, mem_mb=args.mem)
     by_student = {s: [] for s in r.students}
@@ -72,10 +77,10 @@ def cmd_grade(args) -> int:
     if args.json:
         if len(by_student) == 1:
             s = next(iter(by_student))
-            write_json(args.json, gradescope(by_student[s], r.notes.get(s, [])))
+            write_json(args.json, {**gradescope(by_student[s], r.notes.get(s, [])), "sandbox": held})
         else:
             write_json(args.json, {"students": {s: gradescope(rs, r.notes.get(s, []))
-                                                for s, rs in sorted(by_student.items())}})
+                                                for s, rs in sorted(by_student.items())}, "sandbox": held})
     if args.csv:
         write_csv(args.csv, by_student, r.notes)
     if args.report:
@@ -86,4 +91,9 @@ def cmd_grade(args) -> int:
     if len(by_student) > 1:
         print(f"graded {len(results)} submission(s) of {len(by_student)} student(s)"
               + (f"; summary in {args.csv}" if args.csv else ""), file=sys.stderr)
+    failed = [f"{x.student} {x.assignment}" for x in results if any(n.startswith(GRADER_ERROR) for n in x.notes)]
+    if failed:  # never a silent zero: the instructor reruns these
+        print(f"{GRADER_ERROR}: {len(failed)} submission(s) could not be graded: {', '.join(failed[:20])}",
+              file=sys.stderr)
+        return 3
     return 0

@@ -17,7 +17,7 @@ from ..selfcheck import diagnosis
 from . import substitutes
 from .loader import Submission, _called_names, load_submission, useful_import
 from .material import ASSIGNMENTS, Material
-from .sandbox import CPU_S, WALL_S, CheckRun, SandboxRun, run_calls, validate_limits
+from .sandbox import CPU_S, GRADER_ERROR, WALL_S, CheckRun, GraderError, SandboxRun, run_calls, validate_limits
 
 NOT_IMPLEMENTED = "not implemented (the function still raises NotImplementedError)"
 FORM_GATED = ("no points for form yet: none of this function's answers is right on any case, and checks of form "
@@ -198,6 +198,8 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
                 continue
             if fr.status == "graded" and all(t.output.startswith("not implemented") for t in fr.tests):
                 fr.status = "not implemented"
+            if fr.status == "graded" and any(GRADER_ERROR in t.output for t in fr.tests):
+                fr.status = GRADER_ERROR
     res.execution_time = time.perf_counter() - t0
     return res
 
@@ -205,6 +207,10 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
 def _sandbox(statements, jobs, material: Material, kw: dict, res: GradeResult) -> SandboxRun:
     try:
         return run_calls(statements, jobs, blocked_paths=material.blocked_paths, **kw)
+    except GraderError as exc:  # retried already: the grader's failure, never the student's zero
+        if not any(n.startswith(GRADER_ERROR) for n in res.notes):
+            res.notes.append(f"{GRADER_ERROR}: {exc}")
+        return SandboxRun(checks={j["id"]: CheckRun(failure=GRADER_ERROR) for j in jobs})
     except Exception as exc:  # the sandbox itself failed: say so, grade the others
         res.notes.append(f"the sandbox failed: {exc}")
         return SandboxRun(checks={j["id"]: CheckRun(failure=f"the grader could not run this submission: {exc}")

@@ -143,7 +143,7 @@ class _Rule:
             import importlib.machinery
 
             return importlib.machinery.ModuleSpec(name, self)
-        self.record(name if name.split(".")[0] != "cv2" else name)
+        self.record(name)
         raise ImportError(self.message(name), name=name)
 
     def create_module(self, spec):
@@ -334,7 +334,7 @@ def _work(job: SandboxJob, check: CheckJob, w: int, rule: _Rule, np) -> None:
         except NotImplementedError:
             entry = {"ok": False, "error": "NotImplementedError", "not_implemented": True}
         except MemoryError as exc:
-            entry = {"ok": False, "error": f"MemoryError: {exc or 'ran out of memory'}"}
+            entry = {"ok": False, "error": f"MemoryError: ran out of memory ({str(exc)[:200]})"}
         except SystemExit as exc:
             entry = {"ok": False, "error": f"called sys.exit({exc.code!r})"}
         except RecursionError:

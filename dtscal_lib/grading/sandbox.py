@@ -309,8 +309,19 @@ INTERPRETER: str | None = None
 NUMPY_SITE: str | None = None
 
 
+_PATHS: dict = {}
+
+
 def _python() -> tuple[str, list[str], list[str]]:
-    """(interpreter, folders to bind read-only, numpy's folders) for the sandbox."""
+    """(interpreter, folders to bind read-only, numpy's folders + the standard library) for the sandbox."""
+    key = (INTERPRETER, NUMPY_SITE)
+    if key not in _PATHS:
+        _PATHS[key] = _find_python()
+    exe, binds, numpy_binds = _PATHS[key]
+    return exe, list(binds), list(numpy_binds)
+
+
+def _find_python() -> tuple[str, list[str], list[str]]:
     import sysconfig
 
     if INTERPRETER:
@@ -440,8 +451,8 @@ def barriers() -> dict:
            "code can start no process or thread and signal only itself" if seccomp.supported()
            else "no seccomp filter (no system-call table for this architecture)")
     out = {"mode": m, "seccomp": sec,
-           "memory": f"address space capped per process (--mem); the student's code runs in one process that "
-                     f"can start no other, so the cap bounds the submission",
+           "memory": "address space capped per process (--mem); the student's code runs in one process that "
+                     "can start no other, so the cap bounds the submission",
            "answers": "values only, over a capped length-prefixed pipe; judged outside the sandbox"}
     if m == "bubblewrap":
         out.update(filesystem="bubblewrap: only the interpreter, numpy and the kit's allowed modules, read-only; "
