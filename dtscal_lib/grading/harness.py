@@ -304,8 +304,9 @@ def _become_worker(keep: int, mem_mb: int, cpu: int | None) -> None:
 def _probe(job: SandboxJob, w: int, rule: _Rule) -> None:
     _become_worker(w, job.mem_mb, None)
     ns: dict = {"__name__": "submission", "__builtins__": __builtins__}
-    _load(job, ns, lambda msg: _write_all(w, (json.dumps(msg) + "\n").encode()))
-    _write_all(w, b'{"event": "ready"}\n')
+    # each message on a line of its own, even after stray bytes student code wrote on the pipe
+    _load(job, ns, lambda msg: _write_all(w, ("\n" + json.dumps(msg) + "\n").encode()))
+    _write_all(w, b'\n{"event": "ready"}\n')
 
 
 def _work(job: SandboxJob, check: CheckJob, w: int, rule: _Rule, np) -> None:
