@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 MAX_HEADER_BYTES = 4 * 2 ** 20
 MAX_BLOBS = 512
 MAX_ANSWER_BYTES = 256 * 2 ** 20
+ANSWER_MARK = b"DTSCAL01"
 
 
 @dataclass
@@ -355,7 +356,10 @@ def _work(job: SandboxJob, check: CheckJob, w: int, rule: _Rule, np) -> None:
         results.append(entry)
         if entry.get("not_implemented"):
             break
-    _write_all(w, frame({"calls": results}, blobs.items))
+    answer = frame({"calls": results}, blobs.items)
+    # the answer is the last thing written (no student code runs after): its length and a mark
+    # close it, so bytes student code wrote on the pipe before are ignored
+    _write_all(w, answer + struct.pack(">Q", len(answer)) + ANSWER_MARK)
 
 
 # --------------------------------------------------------------------------- zygote

@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from . import seccomp
-from .harness import MAX_ANSWER_BYTES, MAX_BLOBS, MAX_HEADER_BYTES, CheckJob, SandboxJob
+from .harness import ANSWER_MARK, MAX_ANSWER_BYTES, MAX_BLOBS, MAX_HEADER_BYTES, CheckJob, SandboxJob
 
 __all__ = ["CheckJob", "SandboxJob", "Call", "CheckRun", "SandboxRun", "GraderError", "run_calls", "barriers"]
 
@@ -231,6 +231,16 @@ class _Decoder:
                 return None, "unreadable answer"
             return arr, str(desc.get("note", ""))[:120]
         return None, ""
+
+
+def last_answer(data: bytes) -> bytes | None:
+    """The answer frame that closes a worker's output (length + mark at the very end), or None."""
+    if len(data) < 16 or data[-8:] != ANSWER_MARK:
+        return None
+    (n,) = struct.unpack(">Q", data[-16:-8])
+    if n > len(data) - 16:
+        return None
+    return data[len(data) - 16 - n: len(data) - 16]
 
 
 def decode_answers(data: bytes) -> list[Call] | None:
@@ -677,7 +687,8 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
                 raise GraderError("the sandbox broke its protocol")
             c = by_id[cid]
             status = str(header.get("status", ""))[:40]
-            calls = decode_answers(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
+            answer = last_answer(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
+            calls = decode_answers(answer) if answer is not None else None
             if calls is None:
                 run.checks[cid] = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb))
             else:
