@@ -219,6 +219,14 @@ def test_host_unix_socket_unreachable(outside):
     assert "Error" in got, got
 
 
+def test_no_network_interface():
+    """The network namespace: no interface but loopback (read from /proc, no socket needed)."""
+    body = "def f():\n    print(open('/proc/net/dev').read())\n    return 1.0\n"
+    lines = _said(_run(body)).split("\n")[2:]
+    names = [ln.split(":")[0].strip() for ln in lines if ":" in ln]
+    assert names == ["lo"], lines
+
+
 def test_host_proc_not_visible():
     """The sandbox's /proc is its own PID namespace's: a handful of processes, none of the host's."""
     body = ("def f():\n    pids = [int(p) for p in os.listdir('/proc') if p.isdigit()]\n"
