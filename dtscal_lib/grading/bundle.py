@@ -34,7 +34,7 @@ AUTOGRADER="${DTSCAL_AUTOGRADER_ROOT:-/autograder}"
 export DEBIAN_FRONTEND=noninteractive
 echo "setup.sh: installing python3 with apt" >&2
 apt-get update -qq
-apt-get install -y -qq python3 python3-venv python3-pip >/dev/null
+apt-get install -y -qq python3 python3-venv python3-pip bubblewrap >/dev/null  # bubblewrap: the sandbox
 PY=""
 for candidate in python3.13 python3.12 python3.11 python3; do
   if command -v "$candidate" >/dev/null 2>&1 && \\
