@@ -131,6 +131,24 @@ def test_barriers_hold_for_an_unprivileged_grader(outside, user_python):
     assert os.listdir(outside) == [], got
 
 
+USER_ROUTES = {  # as an ordinary user: each body prints ESCAPED when it gets through
+    "memfd": "fd = os.memfd_create('x')\n    print('ESCAPED')",
+    "socket": "import socket\n    socket.socket(socket.AF_UNIX).connect('/run/docker.sock')\n    print('ESCAPED')",
+    "proc": "print('ESCAPED' if len([p for p in os.listdir('/proc') if p.isdigit()]) > 4 else 'own proc only')",
+    "kit": f"print(os.listdir({str(ROOT)!r}))\n    print('ESCAPED')",
+    "fork": "os.fork()\n    print('ESCAPED')",
+    "cv2": "import cv2\n    cv2.findHomography\n    print('ESCAPED')",
+}
+
+
+@pytest.mark.parametrize("route", list(USER_ROUTES))
+def test_routes_as_unprivileged_user(user_python, route):
+    body = f"def f():\n    {USER_ROUTES[route]}\n    return 1.0\n"
+    got = _as_user(user_python, lambda: _said(_run(body)))
+    assert "ESCAPED" not in got, got
+    assert "Error" in got or "own proc only" in got, got
+
+
 def test_users_secret_key_not_readable(user_python):
     """As an ordinary user: a private key readable by the grader's user (its ``~/.ssh/id_rsa``) is
     not in the sandbox's files."""

@@ -485,7 +485,7 @@ def main() -> int:
     send({"event": "ready", "skip": sorted(job.skip)})
     for check in job.checks:
         pid, r = _fork(lambda w, c=check: _work(job, c, w, rule, np))
-        deadline = time.monotonic() + float(check.wall)
+        deadline = time.monotonic() + float(check.wall) * 1e6
         data, ended = _read_capped(r, deadline, MAX_ANSWER_BYTES + MAX_HEADER_BYTES + 16)
         os.close(r)
         status = _reap(pid, deadline if ended else time.monotonic())

@@ -694,7 +694,7 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
             else:
                 run.checks[cid] = CheckRun(calls=calls)
             nxt = next((x for x in job.checks if x.id not in run.checks), None)
-            deadline = time.monotonic() + (nxt.wall + 10 if nxt else 10)
+            deadline = time.monotonic() + (nxt.wall * 1e6 if nxt else 10)
         elif ev == "finished":
             return
 
