@@ -378,7 +378,7 @@ def bwrap_argv(slot: int, seccomp_fd: int | None) -> list[str]:
     uid = SANDBOX_UID_BASE + slot
     argv = ["bwrap", "--unshare-all", "--unshare-user", "--uid", str(uid), "--gid", str(uid),
             "--die-with-parent", "--new-session", "--cap-drop", "ALL", "--clearenv",
-            "--setenv", "PATH", "/nonexistent", "--setenv", "LANG", "C.UTF-8",
+            "--setenv", "PATH", "/nonexistent", "--setenv", "LANG", "C.UTF-8", "--setenv", "OPENBLAS_NUM_THREADS", "1",
             "--ro-bind", "/usr", "/usr"]
     for link in ("lib", "lib64", "lib32", "bin", "sbin"):
         if os.path.islink(f"/{link}"):
@@ -601,7 +601,7 @@ def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
             workdir = tempfile.mkdtemp(prefix="dtscal-grade-")
             job.workdir = workdir
             argv = _bare_argv()
-            env = {"LANG": "C.UTF-8", "PATH": "/nonexistent"}
+            env = {"LANG": "C.UTF-8", "PATH": "/nonexistent", "OPENBLAS_NUM_THREADS": "1"}
         run.notes["uid"] = SANDBOX_UID_BASE + slot if m == "bubblewrap" else os.getuid()
         try:
             proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -694,7 +694,7 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
             else:
                 run.checks[cid] = CheckRun(calls=calls)
             nxt = next((x for x in job.checks if x.id not in run.checks), None)
-            deadline = time.monotonic() + (nxt.wall * 1e6 if nxt else 10)
+            deadline = time.monotonic() + (nxt.wall + 10 if nxt else 10)
         elif ev == "finished":
             return
 
