@@ -76,7 +76,7 @@ MISBEHAVIOURS = {
                     "    return pts * 0\n", "off by"),
     # (names built at run time, so that the academic-honesty rule does not see them first)
     "patch_opencv": ("    cv = __import__('c' + 'v2')\n    setattr(cv, 'perspective' + 'Transform', lambda p, H: p)\n"
-                     "    return pts * 1.0\n", "academic honesty"),
+                     "    return pts * 1.0\n", "cv2 is not allowed in this exercise"),
     "patch_grader": ("    import importlib\n    c = importlib.import_module('dtscal_lib.grading' + '.checks')\n"
                      "    setattr(c, 'judge_' + 'close', lambda *a: (1.0, ''))\n"
                      "    setattr(c, '_com' + 'pare', lambda *a: '')\n    return pts * 0\n", "academic honesty"),

@@ -144,7 +144,8 @@ class _Rule:
             import importlib.machinery
 
             return importlib.machinery.ModuleSpec(name, self)
-        self.record(name)
+        if name not in ("cv2", "cv"):  # importing OpenCV is no finding; reaching for a solver is
+            self.record(name)
         raise ImportError(self.message(name), name=name)
 
     def create_module(self, spec):
