@@ -502,7 +502,7 @@ class _Slots:
             pass
         for k in range(4096):
             try:
-                fd = os.open(self.DIR / f"slot{k}-uid{os.getuid()}", os.O_RDWR | os.O_CREAT, 0o600)
+                fd = os.open(self.DIR / f"slot{k}-uid{os.getuid()}", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
             except OSError:
                 continue
             try:
