@@ -101,6 +101,27 @@ def sandbox_cost(cls: Path) -> dict:
     return out
 
 
+def startup_cost(rounds: int = 15) -> dict:
+    """Median seconds of one sandbox with one trivial check, in bubblewrap and bare (interleaved)."""
+    import statistics
+
+    sys.path.insert(0, str(ROOT))
+    from dtscal_lib.grading import sandbox
+
+    statements = [("import numpy as np", 1), ("def f(x):\n    return np.asarray(x) * 2", 2)]
+    times = {"bubblewrap": [], "bare": []}
+    try:
+        for _ in range(rounds):
+            for mode in times:
+                sandbox.MODE = mode
+                t0 = time.perf_counter()
+                sandbox.run_calls(statements, [sandbox.CheckJob(id=0, calls=[("f", (3.0,))], wall=10, cpu=5)])
+                times[mode].append(time.perf_counter() - t0)
+    finally:
+        sandbox.MODE = None
+    return {m: statistics.median(v) for m, v in times.items()}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--students", type=int, default=60)
@@ -121,6 +142,7 @@ def main() -> int:
         serial = grade(sub, 1, tmp)
         parallel = grade(sub, 2, tmp)
         cost = sandbox_cost(cls)
+        start = startup_cost()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     res = {"one_notebook_s": round(one, 2), "class_submissions": n, "class_jobs2_s": round(full, 1),
@@ -131,7 +153,9 @@ def main() -> int:
            "bubblewrap_vs_bare": round(cost["bubblewrap"] / cost["bare"], 2),
            "sandbox_cost_per_submission_ms": round(1000 * (cost["bubblewrap"] - cost["bare"]) / cost["sandboxes"], 1),
            "sandbox_cost_per_check_ms": round(1000 * (cost["bubblewrap"] - cost["bare"]) / cost["checks"], 2),
-           "same_scores": cost["bubblewrap_score"] == cost["bare_score"]}
+           "same_scores": cost["bubblewrap_score"] == cost["bare_score"],
+           "one_check_bubblewrap_ms": round(1000 * start["bubblewrap"], 1),
+           "one_check_bare_ms": round(1000 * start["bare"], 1)}
     if args.json:
         print(json.dumps(res))
     else:
@@ -145,6 +169,10 @@ def main() -> int:
               f"costs {res['sandbox_cost_per_submission_ms']:.0f} ms per submission ({cost['sandboxes']} sandboxes), "
               f"{res['sandbox_cost_per_check_ms']:.1f} ms per check ({cost['checks']} checks); "
               f"same scores: {res['same_scores']}")
+        print(f"one submission with one trivial check (median of 15): bubblewrap "
+              f"{res['one_check_bubblewrap_ms']:.0f} ms, bare {res['one_check_bare_ms']:.0f} ms: "
+              f"bubblewrap's start costs "
+              f"{res['one_check_bubblewrap_ms'] - res['one_check_bare_ms']:.0f} ms per submission")
     ok = one < 10 and full < 60 and res["bubblewrap_vs_bare"] <= 1.5 and res["same_scores"]
     return 0 if ok else 1
 
