@@ -619,11 +619,13 @@ def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
         try:
             _converse(proc, job, run, skip, err)
         finally:
+            procs = _descendants(proc.pid)  # the sandbox's processes, looked for again once it is gone
             try:
                 os.killpg(proc.pid, signal.SIGKILL)
             except OSError:
                 pass
             proc.wait()
+            run.notes["survivors"] = run.notes.get("survivors", 0) + _survivors(procs)
             drainer.join(timeout=2)
             for f in (proc.stdin, proc.stdout, proc.stderr):
                 try:
@@ -636,6 +638,47 @@ def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
         if workdir:
             shutil.rmtree(workdir, ignore_errors=True)
         _SLOTS.give(slot_fd)
+
+
+def _stat(pid: int) -> list[str] | None:
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return text[text.rindex(")") + 2:].split()
+
+
+def _descendants(root: int) -> dict[int, str]:
+    """``{pid: start time}`` of ``root`` and every process below it."""
+    parent = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            f = _stat(int(d))
+            if f is not None and f[0] not in "ZX":
+                parent[int(d)] = (int(f[1]), f[19])
+    found, todo = {}, [root]
+    while todo:
+        p = todo.pop()
+        if p in parent and p not in found:
+            found[p] = parent[p][1]
+            todo += [c for c, (pp, _) in parent.items() if pp == p]
+    return found
+
+
+def _survivors(procs: dict[int, str], rounds: int = 50) -> int:
+    """How many of ``procs`` still live (same pid, same start time) after ``rounds`` SIGKILLs."""
+    alive = []
+    for _ in range(rounds):
+        alive = [p for p, start in procs.items() if (f := _stat(p)) is not None and f[19] == start and f[0] not in "ZX"]
+        if not alive:
+            return 0
+        for p in alive:
+            try:
+                os.kill(p, signal.SIGKILL)
+            except OSError:
+                pass
+        time.sleep(0.01)
+    return len(alive)
 
 
 def _drain(stream, keep: int, sink: list) -> None:
