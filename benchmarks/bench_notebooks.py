@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     import nbformat
 
     sys.path.insert(0, str(ROOT))
-    from dtscal_lib.release import inject_solutions
+    from dtscal_lib.teaching.release import inject_solutions
 
     base = run(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("pass")]))
     rows = []

@@ -17,7 +17,9 @@ Answer::
      "sigma": observed pixel noise (std of the board residuals, per coordinate, as mrcal infers it),
      "rms": sqrt(sum over points |residual|^2 / N), "rms_reproj_error__pixels": mrcal's own figure,
      "projection_cov": [M][2][2] mrcal.projection_uncertainty(what="covariance") at ``distance``,
-     "n_outliers": ...}
+     "n_outliers": ...,
+     "warp": {"calobject_warp": [x, y] (object unit), "rms": ...} when "warp": true was asked (the board's
+         two-parameter warp fitted last, on a copy: every other figure is of the flat board), else null}
 
 The fit: seeded by ``mrcal.seed_stereographic`` (from ``focal_estimate``, not from the kit's
 answer), then solved as ``mrcal-calibrate-cameras`` does, the lens core first and then everything,
@@ -105,6 +107,13 @@ def main():
                                             observed_pixel_uncertainty=sigma).tolist()
 
     res = mrcal.residuals_chessboard(oi, residuals=x)
+    warp = None
+    if req.get("warp"):  # then the board's warp too, as mrcal-calibrate-cameras does last (on a copy)
+        ow = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in oi.items()}
+        ow["calobject_warp"] = np.zeros(2)
+        ow["do_optimize_calobject_warp"] = True
+        sw = mrcal.optimize(**ow)
+        warp = {"calobject_warp": ow["calobject_warp"].tolist(), "rms": float(sw["rms_reproj_error__pixels"])}
     json.dump({
         "mrcal_version": getattr(mrcal, "__version__", "2.2 (Debian python3-mrcal)"),
         "python": sys.executable,
@@ -117,6 +126,7 @@ def main():
         "rms_reproj_error__pixels": float(stats["rms_reproj_error__pixels"]),
         "n_outliers": int(stats.get("Noutliers", 0)),
         "n_views": V,
+        "warp": warp,
         "projection_cov": pcov,
     }, sys.stdout)
     sys.stdout.write("\n")

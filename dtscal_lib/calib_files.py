@@ -56,23 +56,26 @@ import yaml
 
 from . import duckietown as dt
 from . import safe_yaml
-from .camera import CameraModel, as_dist, rectification_maps, undistort_pixels
+from .camera import CameraModel, as_model_dist, rectification_maps, undistort_pixels
 from .errors import CalibrationFileError, CalibrationFileWarning, DtscalError
 
-#: distortion models a file may declare, with their number of coefficients
-SUPPORTED_MODELS = {"plumb_bob": 5}
+#: distortion models a file may declare, with their number of coefficients: ROS's calibrator
+#: (camera_calibration calibrator.py) writes plumb_bob with 5, rational_polynomial with 8 (OpenCV's
+#: CALIB_RATIONAL_MODEL, ``dist_coeffs.flat[:8]``) and equidistant with 4 (``cv2.fisheye.calibrate``)
+SUPPORTED_MODELS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
+#: the coefficient names of each model, in the file's order
+_COEFF_NAMES = {"plumb_bob": "[k1, k2, p1, p2, k3]", "rational_polynomial": "[k1, k2, p1, p2, k3, k4, k5, k6]",
+                "equidistant": "[k1, k2, k3, k4]"}
 #: ROS models recognised but not supported here, with what to do instead
-_UNSUPPORTED_MODELS = {
-    "rational_polynomial": "it has 8 coefficients (k4..k6 in a denominator) that dtscal's camera model "
-                           "does not implement; recalibrate with the default plumb_bob model",
-    "equidistant": "it is the fisheye model, which dtscal does not implement; "
-                   "recalibrate with the default plumb_bob model",
-}
+_UNSUPPORTED_MODELS: dict[str, str] = {}
 #: order of the keys in a ROS CameraInfo YAML (as the shipped default.yaml)
 INTRINSIC_KEYS = ("image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
                   "distortion_coefficients", "rectification_matrix", "projection_matrix")
 
-_ROBOT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+#: the one robot-name rule (files, topics, COMMIT, ``ros:NAME``): a Duckiebot's name is a component of its ROS
+#: topics ``/NAME/camera_node/...``, and ROS names hold letters, digits and underscores only (ROS wiki, "Names":
+#: "subsequent characters can be alphanumeric ([0-9|a-z|A-Z]), underscores (_)")
+ROBOT_NAME = re.compile(r"[A-Za-z0-9_]+")
 #: longest robot name: a hostname label (Duckiebots are named by their hostname); the
 #: kit's longest file name for it, the backup's temporary ``.NAME.rejected.yaml.bak.XXXXXXXX.tmp``,
 #: then stays far below every filesystem's 255-byte limit
@@ -86,6 +89,11 @@ _MAX_ASPECT = 5.0        # max(fx/fy, fy/fx)
 
 
 # --------------------------------------------------------------------------- paths
+def is_robot_name(name) -> bool:
+    """True for a Duckiebot's name by the one rule (:data:`ROBOT_NAME`)."""
+    return isinstance(name, str) and ROBOT_NAME.fullmatch(name) is not None
+
+
 def check_robot_name(robot: str) -> str:
     """Validate a robot name for writing its calibration; returns it (``default`` is refused)."""
     if not isinstance(robot, str) or not robot:
@@ -94,11 +102,6 @@ def check_robot_name(robot: str) -> str:
         raise CalibrationFileError(
             f"--robot {robot}: default.yaml is the factory calibration and is never overwritten; pass --robot NAME "
             "(robot names are compared ignoring case)"
-        )
-    if not _ROBOT_NAME.fullmatch(robot) or ".." in robot:
-        raise CalibrationFileError(
-            f"robot name {robot[:80]!r} is not valid: use letters, digits, '_', '-' and '.', without path "
-            "separators or '..' (the name of the Duckiebot, e.g. --robot autobot01)"
         )
     if len(robot) > MAX_ROBOT_NAME:
         raise CalibrationFileError(
@@ -110,6 +113,11 @@ def check_robot_name(robot: str) -> str:
         raise CalibrationFileError(
             f"--robot {robot}: names ending in {REJECTED_SUFFIX!r} are kept for refused calibrations "
             f"(NAME{REJECTED_SUFFIX}.yaml); pass the robot's own name"
+        )
+    if not is_robot_name(robot):
+        raise CalibrationFileError(
+            f"robot name {robot[:80]!r} is not valid: a Duckiebot's name has letters, digits and '_' only (it names "
+            "its ROS topics /NAME/camera_node/...), e.g. --robot autobot01"
         )
     return robot
 
@@ -241,7 +249,7 @@ def _check_intrinsic_values(width, height, K, model, D, R, P, where: str) -> Non
     n = SUPPORTED_MODELS[model]
     if D.shape != (n,) or not np.all(np.isfinite(D)):
         raise _fail(where, f"distortion_coefficients has {D.size} values; {model} needs {n} "
-                           "[k1, k2, p1, p2, k3]")
+                           f"{_COEFF_NAMES[model]}")
     if R.shape != (3, 3) or not np.all(np.isfinite(R)):
         raise _fail(where, "rectification_matrix must be a finite 3x3 matrix")
     ortho = np.abs(R @ R.T - np.eye(3)).max()
@@ -346,7 +354,8 @@ class IntrinsicCalibration(CameraModel):
 
     @property
     def D(self) -> np.ndarray:
-        """``[k1, k2, p1, p2, k3]``: the camera's ``dist``."""
+        """The camera's ``dist``: ``[k1, k2, p1, p2, k3]`` (plumb_bob), 8 values (rational_polynomial) or 4
+        (equidistant), as the file's ``distortion_coefficients``."""
         return self.dist
 
     @property
@@ -357,12 +366,15 @@ class IntrinsicCalibration(CameraModel):
     def undistort_pixels(self, uv, rectified: bool = True) -> np.ndarray:
         """Distorted pixels -> rectified pixels (``rectified=True``, through ``R`` and ``P``) or normalized."""
         if not rectified:
-            return undistort_pixels(uv, self.K, self.dist)
-        return undistort_pixels(uv, self.K, self.dist, R=self.R, P=self.P)
+            return undistort_pixels(uv, self.K, self.dist, model=self.model)
+        return undistort_pixels(uv, self.K, self.dist, R=self.R, P=self.P, model=self.model)
 
     def rectification_maps(self, new_K=None, size=None):
         return rectification_maps(self.K, self.dist, self.rectified_K if new_K is None else new_K,
-                                  self.size if size is None else size, self.R)
+                                  self.size if size is None else size, self.R, model=self.model)
+
+    def opencv_maps(self, R=None):
+        return super().opencv_maps(self.R if R is None else R)
 
     def camera(self) -> CameraModel:
         """This camera as a plain :class:`~dtscal_lib.camera.CameraModel` (``P`` as stored, no name).
@@ -405,12 +417,14 @@ class IntrinsicCalibration(CameraModel):
     def from_camera(cls, camera: CameraModel, camera_name: str) -> "IntrinsicCalibration":
         """The file content for a calibrated camera: ``R = I``, ``P = camera.P``.
 
-        A ``radial2`` camera is written as ``plumb_bob`` with ``p1 = p2 = k3 = 0``.
+        A ``radial2`` camera is written as ``plumb_bob`` with ``p1 = p2 = k3 = 0``; rational_polynomial
+        and equidistant keep their model and their 8 or 4 coefficients.
         """
         if not isinstance(camera, CameraModel):
             raise CalibrationFileError(f"from_camera needs a CameraModel, got {type(camera).__name__}")
         w, h = camera.size
-        return cls(str(camera_name), int(w), int(h), camera.K, "plumb_bob", as_dist(camera.dist),
+        model = "plumb_bob" if camera.model == "radial2" else camera.model
+        return cls(str(camera_name), int(w), int(h), camera.K, model, as_model_dist(camera.dist, model),
                    np.eye(3), camera.P)
 
     @classmethod
@@ -437,7 +451,7 @@ class IntrinsicCalibration(CameraModel):
         if model not in SUPPORTED_MODELS:
             raise _fail(where, f"distortion_model is {model!r}; expected one of {sorted(SUPPORTED_MODELS)}")
         K = _matrix(doc, "camera_matrix", 3, 3, where)
-        D = _matrix(doc, "distortion_coefficients", 1, SUPPORTED_MODELS[model], where).ravel()
+        D = _matrix(doc, "distortion_coefficients", 1, None, where).ravel()  # its length: checked below, by model
         R = _matrix(doc, "rectification_matrix", 3, 3, where)
         P = _read_P(_matrix(doc, "projection_matrix", 3, 4, where), where)
         _check_intrinsic_values(width, height, K, model, D, R, P, where)
@@ -494,10 +508,26 @@ def load_intrinsics(path) -> IntrinsicCalibration:
         ``K``, unknown distortion model, non-rotation ``R``, malformed ``P``.
     """
     doc, where = _read_yaml(path)
-    return IntrinsicCalibration.from_dict(doc, where)
+    calib = IntrinsicCalibration.from_dict(doc, where)
+    _warn_outside_profile(calib, where)
+    return calib
 
 
-def validate_homography(H, where: str = "homography", *, writing: bool = False) -> np.ndarray:
+def _warn_outside_profile(calib: "IntrinsicCalibration", where: str) -> None:
+    """One line when the file's focal lengths lie far outside those of the robots of its kind (portrait
+    frames: the DD24's, else the Duckiebot's fleet; :mod:`dtscal_lib.profiles`): loaded, but named."""
+    from .profiles import profile_for_image
+
+    prof = profile_for_image(calib.width, calib.height)
+    lo, hi = prof.fx_per_width
+    fx, fy = float(calib.K[0, 0]), float(calib.K[1, 1])
+    if not all(lo <= f / calib.width <= hi for f in (fx, fy)):
+        _warn(where, f"fx {fx:.0f} / fy {fy:.0f} px at {calib.width} px wide lie far outside a {prof.name}'s cameras "
+                     f"({lo * calib.width:.0f}-{hi * calib.width:.0f} px): another camera, or a calibration to redo")
+
+
+def validate_homography(H, where: str = "homography", *, writing: bool = False,
+                        corrupt_rule: bool = True) -> np.ndarray:
     """Check a ground homography (rectified pixel -> ground metres); returns (3, 3) float64.
 
     Refuses non-finite and singular homographies with a :class:`CalibrationFileError` naming
@@ -519,7 +549,9 @@ def validate_homography(H, where: str = "homography", *, writing: bool = False) 
     if sv[0] == 0 or sv[-1] / sv[0] < 1e-14:
         raise _fail(where, "homography is singular (it maps the image onto a line or a point); "
                            "recalibrate the extrinsics")
-    if dt.homography_is_corrupt(H) and not writing:
+    if not corrupt_rule:  # a robot whose camera sees its ground this way (the DD24: dtscal_lib.profiles)
+        pass
+    elif dt.homography_is_corrupt(H) and not writing:
         _warn(where, f"homography has H[1][2] = {H[1, 2]:g} > 0: the camera's image is rotated 180 degrees "
                      "(mounted upside-down), or the corners were mirrored or mis-ordered. Duckietown reads such "
                      "files but its calibration refuses to write them; check the robot's ground projection")
@@ -688,7 +720,7 @@ def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str, *, rejecte
     return _write(_target(intrinsic_path(out_dir, robot), rejected), calib.to_dict())
 
 
-def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
+def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False, corrupt_rule: bool = True) -> Path:
     """Write ``out_dir/camera_extrinsic/<robot>.yaml`` (``homography: [9 floats]``) atomically.
 
     ``H`` (3, 3) maps rectified pixels to ground metres; it is validated (finite,
@@ -697,7 +729,7 @@ def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """
     check_robot_name(robot)
     path = _target(extrinsic_path(out_dir, robot), rejected)
-    H = validate_homography(H, f"{path} (not written)", writing=True)
+    H = validate_homography(H, f"{path} (not written)", writing=True, corrupt_rule=corrupt_rule)
     return _write(path, {"homography": [_plain(v) for v in H.ravel()]})
 
 
@@ -741,7 +773,7 @@ def _v2_frame(calib: IntrinsicCalibration) -> tuple[np.ndarray, np.ndarray]:
     return Kp, np.array([[sx, 0, -tl[0] * sx], [0, sy, -tl[1] * sy], [0, 0, 1.0]])
 
 
-def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
+def extrinsic_to_v2(H, calib: IntrinsicCalibration, corrupt_rule: bool = True) -> np.ndarray:
     """Classic homography (rectified pixel -> ground m) -> the 3x3 matrix of a version-2 file.
 
     Mirrors lib-dt-computer-vision: its tool fits ``H_v`` from normalized image vectors
@@ -750,7 +782,7 @@ def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
     (``camera_specific``: ``Hv2i @ F``). ``Kp`` is the rectified camera (``P[:, :3]``).
     """
     Kp, Hv2i = _v2_frame(calib)
-    Hv = validate_homography(H, "classic homography", writing=True) @ Kp
+    Hv = validate_homography(H, "classic homography", writing=True, corrupt_rule=corrupt_rule) @ Kp
     return np.linalg.inv(Hv2i) @ (Hv / Hv[2, 2])
 
 
@@ -791,14 +823,14 @@ def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | N
 
 
 def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None,
-                       rejected: bool = False) -> Path:
+                       rejected: bool = False, corrupt_rule: bool = True) -> Path:
     """Write ``camera_extrinsic/<robot>.yaml`` in the classic format (default) or as version ``"2"``.
 
     ``H`` is the classic homography; ``fmt="2"`` needs ``intrinsics`` (object or path) and stamps
     ``date`` (default now, ISO 8601). ``rejected`` writes ``<robot>.rejected.yaml`` beside, in either format.
     """
     if fmt == "classic":
-        return save_extrinsics(H, out_dir, robot, rejected=rejected)
+        return save_extrinsics(H, out_dir, robot, rejected=rejected, corrupt_rule=corrupt_rule)
     if fmt != "2":
         raise CalibrationFileError(f"extrinsic format {fmt!r} is unknown; use 'classic' or '2'")
     if intrinsics is None:
@@ -808,7 +840,7 @@ def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsi
     calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
     check_robot_name(robot)
     path = _target(extrinsic_path(out_dir, robot), rejected)
-    F = extrinsic_to_v2(H, calib)
+    F = extrinsic_to_v2(H, calib, corrupt_rule)
     stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
     text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})
     try:

@@ -26,8 +26,15 @@ import numpy as np
 
 from .errors import DtscalError
 
-#: the distortion models of the kit (defined here only): OpenCV's 5-term ``plumb_bob`` and Zhang's ``radial2``
-DIST_MODELS = ("plumb_bob", "radial2")
+#: the distortion models of the kit (defined here only): OpenCV's 5-term ``plumb_bob``, Zhang's ``radial2``,
+#: and ROS's two others (camera_calibration's calibrator.py): ``rational_polynomial`` (OpenCV's
+#: CALIB_RATIONAL_MODEL, 8 coefficients ``[k1, k2, p1, p2, k3, k4, k5, k6]``) and ``equidistant`` (the fisheye
+#: model of ``cv2.fisheye``, 4 coefficients ``[k1, k2, k3, k4]``)
+DIST_MODELS = ("plumb_bob", "radial2", "rational_polynomial", "equidistant")
+#: how many coefficients a model's ``dist`` (and its file's D) has: ROS's D lengths (5, 8 and 4)
+MODEL_COEFFS = {"plumb_bob": 5, "radial2": 5, "rational_polynomial": 8, "equidistant": 4}
+#: the models the kit's own solver calibrates; the others are calibrated by OpenCV (calibration.calibrate_opencv)
+KIT_SOLVER_MODELS = ("plumb_bob", "radial2")
 
 
 # --------------------------------------------------------------------------- input checks
@@ -219,6 +226,155 @@ def undistort_normalized(xy_d, dist, *, tol: float = 1e-14, max_iter: int = 50) 
     return out
 
 
+# --------------------------------------------------------------------------- every lens model
+def as_model_dist(dist, model: str) -> np.ndarray:
+    """``dist`` as the coefficient vector of ``model``: 5 (plumb_bob, radial2), 8 or 4 values.
+
+    ``rational_polynomial`` accepts 5 (k4..k6 = 0), 8, or OpenCV's 12/14 with zeros past the 8th;
+    ``equidistant`` exactly 4 (``cv2.fisheye``'s ``[k1, k2, k3, k4]``).
+    """
+    if model in ("plumb_bob", "radial2"):
+        return as_dist(dist)
+    if model not in MODEL_COEFFS:
+        raise DtscalError(f"distortion model must be one of {DIST_MODELS}, got {model!r}")
+    d = np.zeros(0) if dist is None else np.asarray(dist, dtype=np.float64).ravel()
+    if not np.all(np.isfinite(d)):
+        raise DtscalError("distortion coefficients contain NaN or infinite values")
+    n = MODEL_COEFFS[model]
+    if model == "rational_polynomial" and d.size in (0, 4, 5, 8):
+        out = np.zeros(8)
+        out[: d.size] = d
+        return out
+    if model == "rational_polynomial" and d.size > 8 and not np.any(d[8:]):
+        return d[:8].copy()
+    if model == "equidistant" and d.size in (0, 4):
+        return np.zeros(4) if d.size == 0 else d.copy()
+    names = "[k1, k2, p1, p2, k3, k4, k5, k6]" if model == "rational_polynomial" else "[k1, k2, k3, k4]"
+    raise DtscalError(f"{model} needs {n} distortion coefficients {names}, got {d.size}: {d}")
+
+
+def _theta_d(theta, k):
+    t2 = theta * theta
+    return theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3]))))
+
+
+def distort_model(xy, dist, model: str = "plumb_bob") -> np.ndarray:
+    """Normalized points -> distorted normalized points under any of the kit's lens models.
+
+    ``rational_polynomial`` (OpenCV's CALIB_RATIONAL_MODEL): the radial factor is
+    ``(1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)``, tangential terms as plumb_bob.
+    ``equidistant`` (``cv2.fisheye``): ``theta = atan(r)``,
+    ``theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``, ``x_d = theta_d / r x``.
+    """
+    if model in ("plumb_bob", "radial2"):
+        return distort_normalized(xy, dist)
+    xy = as_points(xy, 2, "normalized points")
+    d = as_model_dist(dist, model)
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    if model == "rational_polynomial":
+        k1, k2, p1, p2, k3, k4, k5, k6 = d
+        radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        return np.column_stack([xd, yd])
+    r = np.sqrt(r2)
+    theta = np.arctan(r)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(r > 1e-12, _theta_d(theta, d) / np.where(r > 1e-12, r, 1.0), 1.0)
+    return xy * scale[:, None]
+
+
+def undistort_model(xy_d, dist, model: str = "plumb_bob", *, strict: bool = True) -> np.ndarray:
+    """Invert :func:`distort_model`. ``strict=False``: a point that does not converge is NaN instead of an error.
+
+    plumb_bob: :func:`undistort_normalized` (Newton, analytic Jacobian). rational_polynomial: Newton with
+    a central-difference Jacobian. equidistant: Newton on ``theta_d(theta)`` in one dimension, then
+    ``r = tan(theta)`` (a ray beyond 90 degrees has no normalized point: NaN).
+    """
+    xy_d = as_points(xy_d, 2, "distorted normalized points")
+    if model in ("plumb_bob", "radial2"):
+        if strict:
+            return undistort_normalized(xy_d, dist)
+        out = np.full_like(xy_d, np.nan)
+        try:
+            return undistort_normalized(xy_d, dist)
+        except DtscalError:  # some points fold over: solve them one by one, NaN where there is no inverse
+            for i, p in enumerate(xy_d):
+                try:
+                    out[i] = undistort_normalized(p[None], dist)[0]
+                except DtscalError:
+                    pass
+            return out
+    d = as_model_dist(dist, model)
+    if model == "equidistant":
+        td = np.hypot(xy_d[:, 0], xy_d[:, 1])
+        theta = np.clip(td, 0.0, np.pi / 2)
+        for _ in range(50):
+            t2 = theta * theta
+            f = _theta_d(theta, d) - td
+            df = 1.0 + t2 * (3 * d[0] + t2 * (5 * d[1] + t2 * (7 * d[2] + t2 * 9 * d[3])))
+            step = f / np.where(np.abs(df) < 1e-300, 1e-300, df)
+            theta = theta - step
+            if np.all(np.abs(step) < 1e-15):
+                break
+        bad = ~(np.abs(_theta_d(theta, d) - td) <= 1e-9) | ~(theta < np.pi / 2) | ~(theta >= 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = np.where(td > 1e-12, np.tan(theta) / np.where(td > 1e-12, td, 1.0), 1.0)
+        out = xy_d * scale[:, None]
+    else:
+        out = xy_d.copy()
+        h = 1e-7
+        for _ in range(60):
+            f = distort_model(out, d, model) - xy_d
+            if np.all(np.abs(f) < 1e-14):
+                break
+            fx1 = (distort_model(out + [h, 0], d, model) - distort_model(out - [h, 0], d, model)) / (2 * h)
+            fy1 = (distort_model(out + [0, h], d, model) - distort_model(out - [0, h], d, model)) / (2 * h)
+            a, c, b, e = fx1[:, 0], fx1[:, 1], fy1[:, 0], fy1[:, 1]
+            det = a * e - b * c
+            det = np.where(np.abs(det) < 1e-300, 1e-300, det)
+            out = out - np.column_stack([(e * f[:, 0] - b * f[:, 1]) / det, (-c * f[:, 0] + a * f[:, 1]) / det])
+            out[~np.isfinite(out)] = 0.0
+        bad = ~(np.abs(distort_model(out, d, model) - xy_d).max(axis=1) <= 1e-9)
+    if bad.any():
+        if strict:
+            raise DtscalError(
+                f"undistortion did not converge for {int(bad.sum())} point(s) under the {model} model; the lens "
+                "model is not invertible there. Check the distortion coefficients or restrict the points to the "
+                "image.")
+        out = out.copy()
+        out[bad] = np.nan
+    return out
+
+
+def project_rays(rays, K, dist, model: str = "plumb_bob") -> np.ndarray:
+    """Camera-frame points or ray directions (N, 3) -> pixels; NaN for a ray the model cannot image.
+
+    A pinhole model (plumb_bob, rational) images rays in front of the camera (z > 0); equidistant
+    images every ray within 90 degrees of the axis as well (theta from ``atan2(r, z)``).
+    """
+    P = as_points(rays, 3, "rays")
+    K = as_K(K)
+    out = np.full((len(P), 2), np.nan)
+    if model == "equidistant":
+        d = as_model_dist(dist, model)
+        r = np.hypot(P[:, 0], P[:, 1])
+        theta = np.arctan2(r, P[:, 2])
+        ok = theta < np.pi / 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(r > 1e-15, _theta_d(theta, d) / np.where(r > 1e-15, r, 1.0), 1.0 / np.where(
+                P[:, 2] > 0, P[:, 2], 1.0))
+        xy = P[:, :2] * s[:, None]
+        if ok.any():
+            out[ok] = normalized_to_pixel(xy[ok], K)
+        return out
+    ok = P[:, 2] > 0
+    if ok.any():
+        out[ok] = normalized_to_pixel(distort_model(P[ok, :2] / P[ok, 2:3], dist, model), K)
+    return out
+
+
 # --------------------------------------------------------------------------- 3-D projection
 def as_rotation(r) -> np.ndarray:
     """A rotation given as a Rodrigues vector (3,) or a matrix (3, 3), as a (3, 3) matrix."""
@@ -232,7 +388,7 @@ def as_rotation(r) -> np.ndarray:
     raise DtscalError(f"a rotation must be a Rodrigues vector (3,) or a 3x3 matrix, got shape {r.shape}")
 
 
-def project_points(X, r, t, K, dist=None) -> np.ndarray:
+def project_points(X, r, t, K, dist=None, *, model: str = "plumb_bob") -> np.ndarray:
     """Project world points into pixels (activity text, eqs. (1)-(2), plus lens distortion).
 
     Parameters
@@ -263,17 +419,17 @@ def project_points(X, r, t, K, dist=None) -> np.ndarray:
     if np.any(Xc[:, 2] <= 0):
         raise DtscalError(f"{int(np.sum(Xc[:, 2] <= 0))} point(s) are behind the camera (Z <= 0)")
     xy = Xc[:, :2] / Xc[:, 2:3]
-    return normalized_to_pixel(distort_normalized(xy, dist), K)
+    return normalized_to_pixel(distort_model(xy, dist, model), K)
 
 
-def undistort_pixels(uv, K, dist, R=None, P=None) -> np.ndarray:
+def undistort_pixels(uv, K, dist, R=None, P=None, *, model: str = "plumb_bob") -> np.ndarray:
     """Like ``cv2.undistortPoints``: distorted pixels -> ideal points.
 
     Without ``P`` the result is normalized coordinates; with ``P`` (3, 3) or (3, 4) it is
     pixels of the rectified image (``P[:, :3]`` as its camera matrix). ``R`` (3, 3) is a
     rectification rotation applied in between (identity by default).
     """
-    xy = undistort_normalized(pixel_to_normalized(uv, K), dist)
+    xy = undistort_model(pixel_to_normalized(uv, K), dist, model)
     if R is None and P is None:
         return xy
     rays = np.column_stack([xy, np.ones(len(xy))])
@@ -289,7 +445,7 @@ def undistort_pixels(uv, K, dist, R=None, P=None) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- rectification
-def new_camera_matrix(K, dist, size, alpha: float = 0.0) -> np.ndarray:
+def new_camera_matrix(K, dist, size, alpha: float = 0.0, model: str = "plumb_bob") -> np.ndarray:
     """The rectified image's camera matrix, as ROS sets ``P``: ``cv2.getOptimalNewCameraMatrix``.
 
     ``alpha = 0`` keeps only valid pixels (no black border, some field of view lost);
@@ -297,7 +453,15 @@ def new_camera_matrix(K, dist, size, alpha: float = 0.0) -> np.ndarray:
     """
     K = as_K(K)
     w, h = as_size(size)
-    newK, _ = cv2.getOptimalNewCameraMatrix(K, as_dist(dist), (w, h), float(alpha), (w, h))
+    if model == "equidistant":
+        # as ROS's calibrator (camera_calibration calibrator.py, set_alpha for the fisheye model): K with the
+        # focal lengths divided by 1 + alpha (it notes estimateNewCameraMatrixForUndistortRectify misbehaves)
+        newK = K.copy()
+        newK[0, 1] = 0.0
+        newK[0, 0] /= 1.0 + float(alpha)
+        newK[1, 1] /= 1.0 + float(alpha)
+        return newK
+    newK, _ = cv2.getOptimalNewCameraMatrix(K, as_model_dist(dist, model), (w, h), float(alpha), (w, h))
     return np.asarray(newK, dtype=np.float64)
 
 
@@ -312,7 +476,7 @@ def as_size(size, *, name: str = "size", error: type[DtscalError] = DtscalError)
     return w, h
 
 
-def rectification_maps(K, dist, new_K, size, R=None, *, dtype=np.float32):
+def rectification_maps(K, dist, new_K, size, R=None, *, dtype=np.float32, model: str = "plumb_bob"):
     """Pixel maps for ``cv2.remap`` that undistort (and optionally rotate) an image.
 
     For every pixel ``(u, v)`` of the rectified image (camera matrix ``new_K``, size
@@ -336,7 +500,7 @@ def rectification_maps(K, dist, new_K, size, R=None, *, dtype=np.float32):
         xy = rays[:, :2] / rays[:, 2:3]
     ok = np.all(np.isfinite(xy), axis=1) & (rays[:, 2] > 0)
     out = np.full((rows.size, 2), -1.0)
-    out[ok] = normalized_to_pixel(distort_normalized(xy[ok], dist), K)
+    out[ok] = normalized_to_pixel(distort_model(xy[ok], dist, model), K)
     return out[:, 0].reshape(h, w).astype(dtype), out[:, 1].reshape(h, w).astype(dtype)
 
 
@@ -382,14 +546,14 @@ class CameraModel:
     P: np.ndarray | None = field(default=None)
 
     def __post_init__(self):
-        object.__setattr__(self, "K", as_K(self.K).copy())
-        object.__setattr__(self, "dist", as_dist(self.dist))
-        object.__setattr__(self, "size", as_size(self.size))
         if self.model not in DIST_MODELS:
             raise DtscalError(f"distortion model must be one of {DIST_MODELS}, got {self.model!r}")
+        object.__setattr__(self, "K", as_K(self.K).copy())
+        object.__setattr__(self, "dist", as_model_dist(self.dist, self.model))
+        object.__setattr__(self, "size", as_size(self.size))
         if self.P is None:
             P = np.zeros((3, 4))
-            P[:, :3] = new_camera_matrix(self.K, self.dist, self.size, 0.0)
+            P[:, :3] = new_camera_matrix(self.K, self.dist, self.size, 0.0, self.model)
         else:
             P = np.asarray(self.P, dtype=np.float64)
             if P.shape == (3, 3):
@@ -403,18 +567,27 @@ class CameraModel:
         return self.P[:, :3].copy()
 
     def project(self, X, r, t) -> np.ndarray:
-        return project_points(X, r, t, self.K, self.dist)
+        return project_points(X, r, t, self.K, self.dist, model=self.model)
 
     def undistort_pixels(self, uv, rectified: bool = True) -> np.ndarray:
         """Distorted pixels -> rectified pixels (``rectified=True``) or normalized coordinates."""
-        return undistort_pixels(uv, self.K, self.dist, P=self.P if rectified else None)
+        return undistort_pixels(uv, self.K, self.dist, P=self.P if rectified else None, model=self.model)
 
     def rectification_maps(self, new_K=None, size=None):
         return rectification_maps(self.K, self.dist, self.rectified_K if new_K is None else new_K,
-                                  self.size if size is None else size)
+                                  self.size if size is None else size, model=self.model)
+
+    def opencv_maps(self, R=None):
+        """OpenCV's rectification maps for this camera (float32): ``cv2.initUndistortRectifyMap``, or
+        ``cv2.fisheye.initUndistortRectifyMap`` for the equidistant model (OpenCV ignores skew)."""
+        R = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
+        if self.model == "equidistant":
+            return cv2.fisheye.initUndistortRectifyMap(self.K, self.dist.reshape(4, 1), R, self.rectified_K,
+                                                       self.size, cv2.CV_32FC1)
+        return cv2.initUndistortRectifyMap(self.K, self.dist, R, self.rectified_K, self.size, cv2.CV_32FC1)
 
     def with_alpha(self, alpha: float) -> "CameraModel":
         """The same camera with ``P`` recomputed for another ``alpha`` (0 = crop, 1 = keep all)."""
         P = np.zeros((3, 4))
-        P[:, :3] = new_camera_matrix(self.K, self.dist, self.size, alpha)
+        P[:, :3] = new_camera_matrix(self.K, self.dist, self.size, alpha, self.model)
         return CameraModel(self.K, self.dist, self.size, self.model, P)

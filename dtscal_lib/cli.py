@@ -27,6 +27,8 @@ from pathlib import Path
 
 from .errors import CalibrationFileWarning, DtscalError, ImplausibleCalibrationError
 
+#: camera.DIST_MODELS, written out so that the command starts without importing OpenCV (a test keeps them equal)
+_MODELS = ("plumb_bob", "radial2", "rational_polynomial", "equidistant")
 #: exit code of a calibration the kit refuses to believe (see dtscal_lib.plausibility)
 EXIT_REFUSED = 3
 #: library keyword spellings in messages -> the flags of this command
@@ -95,9 +97,10 @@ def cmd_calibrate_intrinsics(args) -> int:
     from .report import quality_for_run  # verdict; warnings on stderr; figures + index.html with --report
 
     quality = quality_for_run(run, args.report)
+    xval = _cross_validate(args, run)
     committed, failed = _commit(args, run, "intrinsics")
     if args.json:
-        _print_json({**run.to_dict(), "quality": quality.to_dict(),
+        _print_json({**run.to_dict(), "quality": quality.to_dict(), "cross_validation": xval,
                      "report": str(quality.report_path) if quality.report_path else None,
                      "commit": committed, "commit_error": failed and str(failed)})
     else:
@@ -110,6 +113,13 @@ def cmd_calibrate_intrinsics(args) -> int:
             print(f"  {n:5s} = {v:10.4f} +- {r.std.get(n, float('nan')):.4f}")
         print("  dist  = [" + ", ".join(f"{d:.6f}" for d in r.dist) + "]")
         print("\n".join(quality.summary_lines(r.std_method)))  # sigma's method, what it means for a robot
+        if xval is not None:
+            print(f"  cross-validation ({len(xval['ratios'])} random half splits): half-set difference / "
+                  "predicted sigma")
+            for i, r in enumerate(xval["ratios"]):
+                print(f"    split {i}: corners {r['corners']:.2f}, inside {r['inside']:.2f} (max {r['max_px']:.2f} px)")
+            if xval["finding"]:
+                print(f"  cross-validation: {xval['finding']['message']}; {xval['finding']['advice']}")
         if run.tally.rejected:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
@@ -121,6 +131,21 @@ def cmd_calibrate_intrinsics(args) -> int:
     if failed:  # after the result is printed: nothing computed is lost
         raise failed
     return _report_doubts(run)
+
+
+def _cross_validate(args, run):
+    """--cross-validate: the views' random halves against their predicted uncertainty (dtscal_lib.compare)."""
+    if not args.cross_validate:
+        return None
+    from .compare import cross_validate
+
+    r = run.result
+    cv = cross_validate(r.object_points, r.image_points, r.image_size, model=r.model, skew=r.skew,
+                        splits=args.cross_validate)
+    finding = cv.finding()
+    if finding is not None:
+        print(f"dtscal: warning: {finding.warning()}", file=sys.stderr)
+    return {**cv.to_dict(), "finding": finding.to_dict() if finding else None}
 
 
 def _commit(args, run, kind: str):
@@ -145,7 +170,8 @@ def cmd_calibrate_extrinsics(args) -> int:
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
                                out_dir=None if args.no_write else args.out, fmt=args.format,
                                topic=args.topic, progress=_progress(not args.quiet, "frames"),
-                               keep_anyway=args.keep_anyway, max_seconds=args.max_seconds)
+                               keep_anyway=args.keep_anyway, max_seconds=args.max_seconds,
+                               robot_type=args.robot_type)
     committed, failed = _commit(args, run, "extrinsics")
     if args.json:
         _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
@@ -168,6 +194,40 @@ def cmd_calibrate_extrinsics(args) -> int:
     return _report_doubts(run)
 
 
+def cmd_compare(args) -> int:
+    """``dtscal compare A.yaml B.yaml``: mrcal's projection difference of B against A (dtscal_lib.compare)."""
+    from .calib_files import load_intrinsics
+    from .compare import PLACES, projection_difference, write_figure
+
+    a, b = load_intrinsics(args.a), load_intrinsics(args.b)
+    comp = projection_difference(a, b, gridn_width=args.gridn, names=(str(args.a), str(args.b)))
+    figure = None
+    if args.report:
+        out = Path(args.report)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            figure = out / "compare.png"
+            write_figure(comp, figure)
+        except OSError as e:
+            raise DtscalError(f"--report {args.report}: cannot write the figure ({e}); "
+                              "choose a writable folder") from None
+    if args.json:
+        _print_json({**comp.to_dict(), "figure": str(figure) if figure else None})
+        return 0
+    print(f"{args.b} against {args.a} ({a.model} / {b.model}, {a.width}x{a.height}): after a rotation of "
+          f"{comp.rotation_deg:.3f} deg (fitted within {comp.focus_radius:.0f} px of the centre, as mrcal does)")
+    print(f"  max {comp.max_px:.3f} px, RMS {comp.rms_px:.3f} px over a {comp.diff.shape[1]}x{comp.diff.shape[0]} grid"
+          + (f"; {comp.n_unprojectable} grid points cannot be unprojected by a model" if comp.n_unprojectable else ""))
+    for name in PLACES:
+        v = comp.at[name]
+        print(f"  {name:12s} ({v['pixel'][0]:6.1f}, {v['pixel'][1]:6.1f}): {v['diff_px']:.3f} px")
+    print("  (a ROS calibration file carries no uncertainty: compare with the calibrations' own sigma in "
+          "notebook 06 or with calibrate-intrinsics --cross-validate)")
+    if figure:
+        print(f"wrote {figure}")
+    return 0
+
+
 def cmd_synth(args) -> int:
     from .synth import generate
     from .validation import check_output_folder, check_seed
@@ -184,61 +244,10 @@ def cmd_synth(args) -> int:
     return 0
 
 
-def cmd_release(args) -> int:
-    from . import release
-    from .paths import repo_root
-
-    root = Path(args.repo) if args.repo else repo_root()
-    if args.check:
-        diffs = release.check_notebooks(root / "solutions", root / "notebooks")
-        if diffs:
-            print("notebooks/ is out of date with solutions/; run `dtscal release --write` to regenerate:",
-                  file=sys.stderr)
-            for d in diffs:
-                print("  " + d, file=sys.stderr)
-            return 1
-        print("notebooks/ matches solutions/")
-        return 0
-    if args.execute:
-        for p in release.execute_solutions(root / "solutions", progress=True):
-            print(f"executed {p}")
-    if args.write or args.execute:
-        for p in release.generate_notebooks(root / "solutions", root / "notebooks"):
-            print(p)
-        return 0
-    if not args.out:
-        raise DtscalError("give OUT (folder for the student release), or --check, or --write")
-    print(release.release(Path(args.out), repo_root=root))
-    return 0
 
 
-def cmd_course(args) -> int:
-    from .course import workspace
-    from .datasets import session_dir
-    from .paths import repo_root
-
-    root = repo_root()
-    if args.update:
-        report = workspace.update_workspace(root)
-        print(report.text())
-        return 0 if report.ok else 1
-    session_dir()  # fails early, with the fix, if the recording is missing
-    cmd = workspace.jupyter_command(root, instructor=args.instructor, port=args.port, ip=args.ip,
-                                    no_browser=args.no_browser)
-    print("starting JupyterLab:", " ".join(cmd), file=sys.stderr)
-    os.execv(sys.executable, cmd)
-    return 0  # pragma: no cover
 
 
-def cmd_handin(args) -> int:
-    from .course import handin
-    from .paths import repo_root
-
-    path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
-    print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
-    print("hand in this file (upload it to Gradescope, or as your instructor says); with GitHub Classroom, "
-          "commit and push instead: git add workspace && git commit -m 'hand in' && git push")
-    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -272,21 +281,36 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
     common(sp)
-    sp.add_argument("--model", choices=["plumb_bob", "radial2"], default="plumb_bob")
+    sp.add_argument("--model", choices=_MODELS, default="plumb_bob",
+                    help="lens model: plumb_bob (k3 = 0, as ROS), radial2 (Zhang's k1, k2), rational_polynomial "
+                         "(k1-k6, p1, p2) or equidistant (fisheye); the last two are calibrated by OpenCV")
     sp.add_argument("--skew", action="store_true", help="also estimate the skew of K (own refinement)")
     sp.add_argument("--image-size", metavar="WxH",
                     help="size of the frames to calibrate (default: the size in which the board is found most)")
     sp.add_argument("--report", metavar="DIR", help="write figures and DIR/index.html on how good the calibration is")
+    sp.add_argument("--cross-validate", nargs="?", type=int, const=5, default=0, metavar="SPLITS",
+                    help="calibrate random halves of the views (default 5 splits) and compare them against their "
+                         "predicted uncertainty (plumb_bob and radial2)")
     sp.set_defaults(func=cmd_calibrate_intrinsics)
 
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")
     common(sp)
     sp.add_argument("--intrinsics", required=True, help="Duckietown intrinsic YAML (camera_intrinsic/NAME.yaml)")
+    sp.add_argument("--robot-type", choices=["duckiebot", "dd24"], default=None,
+                    help="the robot on the board (default: the one the board implies: --square 0.017 is the DD24's)")
     sp.add_argument("--format", choices=["classic", "2"], default="classic",
                     help="extrinsic file: classic flat homography (default) or Duckietown's newer version 2")
     sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "
                     "http://ROBOT.local/files/data/config/calibrations/camera_extrinsic/ROBOT.yaml)")
     sp.set_defaults(func=cmd_calibrate_extrinsics)
+
+    sp = sub.add_parser("compare", help="how far two intrinsic calibrations of one camera differ over the image")
+    sp.add_argument("a", help="intrinsic file (camera_intrinsic/NAME.yaml), e.g. the robot's current one")
+    sp.add_argument("b", help="intrinsic file to compare with it, e.g. the new calibration")
+    sp.add_argument("--gridn", type=int, default=60, help="grid points across the image (default 60, as mrcal)")
+    sp.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
+    sp.add_argument("--report", metavar="DIR", help="write the difference map DIR/compare.png")
+    sp.set_defaults(func=cmd_compare)
 
     sp = sub.add_parser("synth", help="regenerate the synthetic recorded Duckiebot session")
     sp.add_argument("--out", default="data", help="data folder (default ./data)")
@@ -294,25 +318,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-q", "--quiet", action="store_true")
     sp.set_defaults(func=cmd_synth)
 
-    for name in ("handout", "release"):
-        sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ "
-                                       "with solutions/")
-        release_args(sp)
+    from .teaching.command import add_parsers as add_teaching_parsers  # course, handin, release, handout
 
-    sp = sub.add_parser("course",
-                        help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
-    sp.add_argument("--port", type=int, default=8888)
-    sp.add_argument("--ip", default=None)
-    sp.add_argument("--no-browser", action="store_true")
-    sp.add_argument("--instructor", action="store_true", help="open solutions/ (the instructor's kit) instead")
-    sp.add_argument("--update", action="store_true",
-                    help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
-    sp.set_defaults(func=cmd_course)
-
-    sp = sub.add_parser("handin", help="zip your workspace notebooks into handin/NAME.zip to hand in")
-    sp.add_argument("--name", help="your name, for the file name (default: git's user.name, else your login)")
-    sp.add_argument("--out", metavar="FILE.zip", help="where to write the zip (default handin/NAME.zip)")
-    sp.set_defaults(func=cmd_handin)
+    add_teaching_parsers(sub)
 
     try:
         from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
@@ -330,15 +338,6 @@ def _no_grader(args) -> int:
     return 2
 
 
-def release_args(sp) -> None:
-    sp.add_argument("out", nargs="?", help="folder to write the student release into")
-    sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
-    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/ (seconds; enough "
-                    "after a change to text or code that leaves the stored outputs as they are)")
-    sp.add_argument("--execute", action="store_true",
-                    help="re-run every solution notebook (storing its outputs), then regenerate notebooks/")
-    sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")
-    sp.set_defaults(func=cmd_release)
 
 
 def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:

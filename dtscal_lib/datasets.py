@@ -8,7 +8,11 @@ Where the data folder is found, first match wins:
 
 1. the environment variable ``DTSCAL_DATA`` (a folder holding ``session/``);
 2. ``data/`` beside the package, in the kit checkout (editable install);
-3. ``./data`` in the current folder.
+3. ``./data`` in the current folder;
+4. ``<prefix>/share/dtscal/data``: the copy a pip-installed kit carries (the wheel's data files,
+   ``[tool.setuptools.data-files]`` in ``pyproject.toml``), under the environment's prefix or the
+   user's base (``pip install --user``). This is how the notebooks find the recording on a
+   JupyterHub, opened in place from an nbgitpuller link, with no ``DTSCAL_DATA``, checkout or workspace.
 
 Examples
 --------
@@ -42,6 +46,24 @@ def _has_session(folder: Path) -> bool:
     return (folder / "session" / TRUTH_FILE).is_file()
 
 
+def _installed_dirs() -> list[Path]:
+    """Where ``pip install`` puts the wheel's data files: ``share/dtscal/data`` under the install schemes'
+    ``data`` path (the environment's prefix, the user's base), in that order, without repeats."""
+    import sys
+    import sysconfig
+
+    roots = [sysconfig.get_paths().get("data"), sys.prefix]
+    try:
+        roots.append(sysconfig.get_paths(f"{os.name}_user").get("data"))
+    except KeyError:  # no user scheme on this platform
+        pass
+    out: list[Path] = []
+    for r in roots:
+        if r and (Path(r) / "share" / "dtscal" / "data") not in out:
+            out.append(Path(r) / "share" / "dtscal" / "data")
+    return out
+
+
 def data_dir() -> Path:
     """The folder holding the bundled recording (it contains ``session/``).
 
@@ -60,7 +82,7 @@ def data_dir() -> Path:
                 f"{_REGENERATE.replace('--out data', '--out ' + str(folder))}"
             )
         return folder
-    candidates = [Path(__file__).resolve().parent.parent / "data", Path.cwd() / "data"]
+    candidates = [Path(__file__).resolve().parent.parent / "data", Path.cwd() / "data", *_installed_dirs()]
     for folder in candidates:
         if _has_session(folder):
             return folder

@@ -1,12 +1,18 @@
 """The kit's one figure convention: pyplot-free matplotlib figures that show themselves.
 
 Used by the library's report (:mod:`dtscal_lib.report`) and by the teaching layer
-(:mod:`dtscal_lib.course`, which re-exports it as ``dtscal_lib.course.figure``).
+(:mod:`dtscal_lib.teaching.course`, which re-exports it as ``dtscal_lib.teaching.course.figure``).
 
 Every course figure is a :class:`CourseFigure` made by :func:`new_figure`: no pyplot, no
 global ``rcParams``, no ``plt.show()``. A notebook shows a figure by leaving it as the cell's
 last value; it is stored as a small PNG (:data:`DPI`, :data:`PHOTO_DPI`) so notebooks stay
-small, and its text form (``<CourseFigure size ...>``) is the same on every machine.
+small. Its text form (``text/plain``, what a screen reader, a static page or a diff shows instead of the picture)
+is an alt text: a sentence saying what the figure shows (:attr:`CourseFigure.alt`, set by the function that draws
+it), followed by each panel's title and axes. It is the same on every machine.
+
+Colours come from :data:`PALETTE`, Okabe and Ito's colour-blind-safe set (Okabe & Ito, *Color Universal Design*,
+2008, https://jfly.uni-koeln.de/color/): no red/green pair, distinguishable under deuteranopia and protanopia
+(``tests/test_figure_palette.py`` checks it with Machado et al.'s 2009 simulation matrices).
 """
 
 from __future__ import annotations
@@ -23,21 +29,61 @@ from .boards import DUCKIETOWN_BOARD, Board
 from .duckietown import IMAGE_SIZE
 
 __all__ = ["CourseFigure", "new_figure", "image_axes", "draw_board", "show_image", "show_images", "png_bytes", "DPI",
-           "PHOTO_DPI", "BOARD_COLOR", "TRUTH_COLOR", "OTHER_COLOR"]
+           "PHOTO_DPI", "BOARD_COLOR", "TRUTH_COLOR", "OTHER_COLOR", "ARROW_COLOR", "PALETTE", "describe"]
 
 #: resolution of plots (dots per inch)
 DPI = 80
 #: camera frames compress poorly as PNG: a lower resolution keeps notebooks small
 PHOTO_DPI = 70
-BOARD_COLOR, TRUTH_COLOR, OTHER_COLOR = "tab:orange", "tab:blue", "tab:green"
+#: Okabe-Ito's colour-blind-safe palette (black left out: the kit draws marks in black separately)
+PALETTE = {"orange": "#E69F00", "sky blue": "#56B4E9", "bluish green": "#009E73", "yellow": "#F0E442",
+           "blue": "#0072B2", "vermillion": "#D55E00", "reddish purple": "#CC79A7"}
+#: what the course figures draw: the board, the truth or an ideal grid, a second estimate, residual arrows
+BOARD_COLOR, TRUTH_COLOR, OTHER_COLOR = PALETTE["orange"], PALETTE["blue"], PALETTE["reddish purple"]
+ARROW_COLOR = PALETTE["vermillion"]
 _FONT = {"font.size": 9, "axes.titlesize": 10}
 
 
 class CourseFigure(Figure):
-    """A matplotlib Figure that shows itself as a PNG in a notebook (no pyplot needed)."""
+    """A matplotlib Figure that shows itself as a PNG in a notebook (no pyplot needed).
+
+    ``alt`` is the sentence that says what the figure shows; its text form (:func:`describe`) is that
+    sentence plus each panel's title, the alt text notebooks store as ``text/plain``.
+    """
+
+    alt: str = ""
 
     def _repr_png_(self) -> bytes:
         return png_bytes(self)
+
+    def __repr__(self) -> str:  # text/plain in a notebook: the alt text, never "<CourseFigure size ...>"
+        return describe(self)
+
+
+def describe(fig: Figure) -> str:
+    """The alt text of a figure: its ``alt`` sentence (or a generic one), then each panel's title and axes.
+
+    >>> fig = new_figure(2.0, 1.0); fig.alt = "A test figure."
+    >>> ax = fig.add_subplot(); _ = ax.set_title("one panel"); _ = ax.set_xlabel("u (px)")
+    >>> describe(fig)
+    'A test figure. Panel: one panel (u (px)).'
+    """
+    panels = []
+    for ax in fig.axes:
+        title = ax.get_title() or ax.get_title("left")
+        if not title and not ax.get_xlabel():  # a colour bar or an empty axes
+            label = ax.get_ylabel() or ax.get_xlabel()
+            if label:
+                panels.append(f"colour bar: {label}")
+            continue
+        labels = ", ".join(x for x in (ax.get_xlabel(), ax.get_ylabel()) if x)
+        text = " ".join(title.split())  # titles may hold line breaks
+        panels.append(text + (f" ({labels})" if labels else ""))
+    alt = getattr(fig, "alt", "") or "A figure."
+    if not panels:
+        return alt
+    head = "Panel" if len(panels) == 1 else f"{len(panels)} panels"
+    return f"{alt} {head}: " + "; ".join(panels) + "."
 
 
 def png_bytes(fig: Figure, dpi: float | None = None) -> bytes:
@@ -99,9 +145,15 @@ def show_image(ax, image: np.ndarray, title: str = "") -> None:
 
 
 def show_images(images: Sequence[np.ndarray], titles: Sequence[str], width: float = 4.2) -> CourseFigure:
-    """Images (BGR or grey) side by side, titled."""
-    fig = new_figure(width * len(images), width * 0.78, dpi=PHOTO_DPI)
-    axes = fig.subplots(1, len(images), squeeze=False)[0]
+    """Images (BGR or grey) side by side, titled (``width`` inches each; more than three go in two rows)."""
+    cols = len(images) if len(images) <= 3 else -(-len(images) // 2)  # more than three: two legible rows
+    rows = -(-len(images) // cols)
+    fig = new_figure(width * cols, width * 0.78 * rows, dpi=PHOTO_DPI)
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax in axes[len(images):]:
+        ax.remove()
     for ax, im, title in zip(axes, images, titles):
         show_image(ax, im, title)
+    fig.alt = (f"{len(images)} camera image{'s' if len(images) > 1 else ''} side by side; "
+               "the titles say what each shows.")
     return fig

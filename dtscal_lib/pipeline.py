@@ -122,10 +122,11 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         ``size_mismatch`` and skipped.
     """
     check_board(board)
-    session = IntrinsicSession(board, model=model, skew=skew, image_size=image_size)
-    src = _open_frames(source_spec, topic, max_seconds, session.ready)
-    session.robot = _robot(robot, src, out_dir is not None)
-    session.stream, session.source = src.is_stream, src.describe()
+    # a live camera stops once the session is ready: the session is made (whole) right after the source
+    src = _open_frames(source_spec, topic, max_seconds, lambda: session.ready())
+    session = IntrinsicSession(board, model=model, skew=skew, image_size=image_size,
+                               robot=_robot(robot, src, out_dir is not None), stream=src.is_stream,
+                               source=src.describe())
     if out_dir is not None:
         check_output_folder(out_dir)
     for frame in (progress(src) if progress else src):
@@ -174,7 +175,7 @@ class ExtrinsicRun:
 def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIETOWN_BOARD,
                          robot: str | None = None, out_dir=None, topic: str | None = None,
                          progress=None, keep_anyway: bool = False, max_seconds: float | None = None,
-                         fmt: str = "classic") -> ExtrinsicRun:
+                         fmt: str = "classic", robot_type: str | None = None) -> ExtrinsicRun:
     """Duckietown's extrinsic procedure on the first usable frame of a source.
 
     ``intrinsics_file`` is a Duckietown intrinsic YAML; the homography maps pixels of the
@@ -183,7 +184,10 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
     classic format or (``fmt="2"``) Duckietown's version 2, if the homography describes a camera
     looking down at the ground ahead (:func:`~dtscal_lib.ground.ground_homography_doubts`);
     ``keep_anyway`` as in :func:`calibrate_intrinsics` (the rejected file in the same format).
+    ``robot_type`` (``"duckiebot"``, ``"dd24"``) overrides the robot the board implies (:mod:`dtscal_lib.profiles`).
     """
+    from .profiles import profile_for
+
     from . import calib_files
 
     check_board(board)
@@ -192,7 +196,8 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
                      hint="; give the intrinsic file of the camera that took these frames (--intrinsics)")
     src = _open_frames(source_spec, topic, max_seconds)
     session = ExtrinsicSession(calib.camera(), board, robot=_robot(robot, src, out_dir is not None),
-                               keep="first", intrinsics=calib, source=src.describe())
+                               keep="first", intrinsics=calib, source=src.describe(),
+                               profile=profile_for(board, robot_type))
     if out_dir is not None:
         check_output_folder(out_dir)
     for frame in (progress(src) if progress else src):

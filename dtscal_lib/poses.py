@@ -1,8 +1,8 @@
 """Board poses in front of a camera, and the points and homographies they give: the kit's one generator.
 
 Everything that makes synthetic views by construction draws its poses here: the notebooks'
-self-checks (:mod:`dtscal_lib.selfcheck`), the grader's checks (:mod:`dtscal_lib.grading.checks`),
-the course figures (:mod:`dtscal_lib.course`), the benchmarks and the tests. The recorded
+self-checks (:mod:`dtscal_lib.teaching.selfcheck`), the grader's checks (:mod:`dtscal_lib.grading.checks`),
+the course figures (:mod:`dtscal_lib.teaching.course`), the benchmarks and the tests. The recorded
 session (:mod:`dtscal_lib.synth`) places its hand-held board by pixel and depth instead, but
 about the same :attr:`~dtscal_lib.boards.Board.centre`.
 

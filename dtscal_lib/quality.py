@@ -51,17 +51,18 @@ hold the board next in the ... of the image (filling it, tilted), where the unce
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from .camera import pixel_to_normalized, project_points, undistort_normalized
+from .camera import KIT_SOLVER_MODELS, pixel_to_normalized, project_points, undistort_model
 from .covariance import projection_covariance, rodrigues
 from .errors import CalibrationError, DtscalError
 from .findings import Finding
 
 __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "residuals", "grid_indices",
+           "leave_out_outlier_corners", "corner_severity",
            "projection_uncertainty", "image_region", "consequences", "explain", "REGION_NAMES"]
 
 #: no detector measures corners of an 8-bit image much better than this (pixels, per coordinate);
@@ -84,9 +85,15 @@ from .limits import (  # noqa: E402
     OFFSET_Z,
     RADIAL_FRACTION,
     RADIAL_Z,
+    LENS_SHARE,
+    OUTLIER_CORNER_MAX_SHARE,
+    OUTLIER_CORNER_MIN_PX,
+    OUTLIER_CORNER_Z,
     SYSTEMATIC_RATIO_BAD,
     TILT_BAD_DEG,
     TILT_DOUBTFUL_DEG,
+    UNEXPLAINED_RATIO_BAD,
+    UNEXPLAINED_RATIO_DOUBTFUL,
     VIEW_OUTLIER_FACTOR,
 )
 
@@ -164,6 +171,12 @@ class Quality:
     report_path: object = None
     #: what the calibration means for a Duckiebot (:func:`consequences`); None without the uncertainty
     consequences: dict | None = None
+    #: remarks that do not change the verdict (severity "good"): what explains a residual above the noise
+    notes: list = field(default_factory=list)
+    #: the calibration repeated without the outlier corners (finding ``outlier_corners``), else None
+    without_outlier_corners: object = None
+    #: the richer models fitted to these corners (:mod:`dtscal_lib.richer`), by name; None when not needed
+    richer: dict | None = None
 
     def meaning(self) -> str:
         """The verdict and its consequences for a robot, in words a student can act on."""
@@ -222,6 +235,10 @@ class Quality:
                 "worst_region": u.worst_region(),
             },
             "more_data_where": self.help_region,
+            "notes": [n.to_dict() for n in self.notes],
+            "richer_models": None if self.richer is None else {
+                k: {"sigma_px": float(f.sigma), "rms_px": float(f.rms), "dist_terms": list(f.dist_names),
+                    "warp_mm": [float(1000.0 * w) for w in f.warp]} for k, f in self.richer.items()},
             "consequences": self.consequences,
             "meaning": self.meaning(),
         }
@@ -243,7 +260,7 @@ def residuals_of(fit, obj_list, img_list) -> list[np.ndarray]:
     R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
     Rv = R[view]
     P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
-    q = project_points(P, np.zeros(3), np.zeros(3), fit.K, fit.dist)
+    q = project_points(P, np.zeros(3), np.zeros(3), fit.K, fit.dist, model=getattr(fit, "model", "plumb_bob"))
     obs = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in img_list])
     return np.split(q - obs, np.cumsum(counts)[:-1])
 
@@ -323,8 +340,19 @@ def corner_noise(object_points, image_points) -> tuple[float, int]:
 
 # =========================================================================== projection uncertainty
 def _uncertainty_inputs(result):
-    """The normal-equation blocks and the intrinsics' covariance of a result (:mod:`dtscal_lib.covariance`)."""
-    return result.normal_blocks(), result.intrinsic_covariance()
+    """The normal-equation blocks and the intrinsics' covariance the projection uncertainty propagates.
+
+    The noise model's, ``sigma^2 S^-1`` (:mod:`dtscal_lib.covariance`), as mrcal's
+    ``projection_uncertainty`` propagates its ``observed_pixel_uncertainty``: the projection uncertainty
+    is what the corner noise alone leaves, and it agrees with mrcal's on the same corners and model
+    (``benchmarks/bench_mrcal.py``, 1.03x: the kit's sigma divides by ``2N - p``). The parameters' own
+    standard deviations (``result.std``) stay the larger of that and the views' disagreement: on real
+    photographs the views disagree 1.3-2.6x more than the noise says, because of the print's and the
+    detector's shared pattern, which is a bias the verdict names (``unexplained_fit``, ``board_warp``), not a
+    noise to spread over the image corners.
+    """
+    blocks = result.normal_blocks()
+    return blocks, blocks.sigma2 * np.linalg.inv(blocks.schur())
 
 
 def _projection_jacobian(P: np.ndarray, K: np.ndarray, dist: np.ndarray, skew: bool, dist_idx):
@@ -353,15 +381,7 @@ def _projection_jacobian(P: np.ndarray, K: np.ndarray, dist: np.ndarray, skew: b
 def _rays(result, pix: np.ndarray) -> np.ndarray:
     """Unit rays (M, 3) of pixels; NaN where the distortion model cannot be inverted (far outside the data)."""
     xy = pixel_to_normalized(pix, result.K)
-    try:
-        und = undistort_normalized(xy, result.dist)
-    except DtscalError:
-        und = np.full_like(xy, np.nan)
-        for i, p in enumerate(xy):
-            try:
-                und[i] = undistort_normalized(p[None], result.dist)[0]
-            except DtscalError:
-                pass
+    und = undistort_model(xy, result.dist, getattr(result, "model", "plumb_bob"), strict=False)
     ray = np.column_stack([und, np.ones(len(und))])
     return ray / np.linalg.norm(ray, axis=1, keepdims=True)
 
@@ -376,9 +396,9 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     and a change of ``cx`` that a small rotation of every pose compensates moves no projection. So
     the point is mapped into every board frame with the solved poses, back with perturbed poses,
     averaged, and projected with perturbed intrinsics; the Jacobian of that with respect to all
-    parameters (intrinsics and every pose) is propagated through their joint covariance: the
-    intrinsics' honest one (``result.std_method``: at least the noise model's ``sigma^2 (J^T J)^-1``,
-    more when the views disagree) and each pose's given the intrinsics, block by block
+    parameters (intrinsics and every pose) is propagated through their joint covariance: by default the
+    noise model's ``sigma^2 (J^T J)^-1``, as mrcal (:func:`_uncertainty_inputs`; ``cov`` gives another
+    intrinsic covariance, e.g. ``result.intrinsic_covariance()``), block by block
     (:func:`dtscal_lib.covariance.projection_covariance`): linear in the views, in time and memory.
 
     Parameters
@@ -575,18 +595,209 @@ def _radial_finding(result, res, noise) -> Finding | None:
     if worst is None:
         return None
     m, r0, r1 = worst
-    richer = _richer_model(result)
     return Finding("radial", "bad" if abs(m) > 2 * noise else "doubtful",
                    f"corners {r0:.0f}-{r1:.0f} px from the principal point are off by {m:+.2f} px radially on "
                    f"average (corner noise {noise:.3f} px): a radial pattern the {result.model} distortion "
                    "model cannot absorb",
-                   f"{richer}; and show the board in the image corners, where distortion is strongest")
+                   "show the board in the image corners, where distortion is strongest")
 
 
-def _richer_model(result) -> str:
-    if result.model == "radial2":
-        return "use --model plumb_bob (radial2 has no tangential terms)"
-    return "estimate k3 as well (or use a richer lens model)"
+def _richer_model(result, noise: float, fits: dict | None) -> str:
+    """Advice about the lens model, from the richer models actually fitted (:func:`_richer_fits`)."""
+    if result.model == "equidistant":  # calibrated by OpenCV's fisheye module: no finer model is fitted
+        return "use --model rational_polynomial (the fisheye model has no tangential terms), or check the board"
+    if result.model == "rational_polynomial":
+        return "the richest of ROS's models already: check the board's flatness and the detections"
+    fits = _richer_fits(result, noise) if fits is None else fits
+    lens = {k: f for k, f in fits.items() if k != "warp"}
+    name, share = _best_lens(result, noise, lens)
+    if name is not None and share >= LENS_SHARE:
+        return f"{_LENS_ADVICE[name]}: fitted, it explains {100 * share:.0f} % of the residual above the noise"
+    tried = ", ".join(_LENS_WORDS[k] for k in lens)
+    return (f"not the lens model: {tried} fitted to these corners explain{'s' if len(lens) == 1 else ''} only "
+            f"{100 * max(share, 0.0):.0f} % of the residual above the noise")
+
+
+#: the lens candidates in words (the finding's message) and as advice
+_LENS_WORDS = {"k3": "k3", "rational": "OpenCV's 8-coefficient rational model", "tangential": "tangential terms"}
+_LENS_ADVICE = {"k3": "estimate k3 as well (dtscal_lib.calibration.calibrate(..., fix_k3=False); ROS keeps k3 = 0)",
+                "rational": "use a richer lens model, OpenCV's 8-coefficient rational (not in ROS's camera_info: use "
+                            "a lens with less distortion or keep to the well-modelled centre)",
+                "tangential": "use --model plumb_bob (radial2 has no tangential terms)"}
+
+
+def _richer_fits(result, noise: float | None = None) -> dict:
+    """The finer lens models and the board warp fitted to a result's own corners (:mod:`dtscal_lib.richer`).
+
+    The rational model holds every other lens candidate (k3, tangential terms), so they are fitted only when
+    it explains at least :data:`LENS_SHARE` of the residual above ``noise`` (to name the smallest model that
+    does): the common case costs two fits (``benchmarks/bench_calibrate.py``).
+    """
+    from .richer import candidates, excess_share, fit_richer
+
+    if result.model not in ("plumb_bob", "radial2"):  # OpenCV's rational and fisheye results: nothing finer here
+        return {}
+    def fit(name):
+        try:
+            out[name] = fit_richer(result, name)
+        except (cv2.error, np.linalg.LinAlgError, ValueError):
+            pass
+
+    out: dict = {}
+    fit("rational")
+    fit("warp")
+    rational = out.get("rational")
+    if noise is None or rational is None or excess_share(result.sigma, rational.sigma, noise) >= LENS_SHARE:
+        for name in candidates(result):
+            if name not in out:
+                fit(name)
+    return out
+
+
+def _best_lens(result, noise, lens: dict) -> tuple[str | None, float]:
+    """The lens candidate to name: the one with fewest parameters among those explaining at least
+    :data:`LENS_SHARE` of the residual above the noise (k3 before the rational model: ROS's files hold k3),
+    else the one explaining most."""
+    from .richer import excess_share
+    shares = {k: excess_share(result.sigma, f.sigma, noise) for k, f in lens.items()}
+    enough = [k for k, v in shares.items() if v >= LENS_SHARE]
+    if enough:
+        k = min(enough, key=lambda n: (lens[n].n_params, -shares[n]))
+        return k, shares[k]
+    k = max(shares, key=shares.get, default=None)
+    return (k, shares[k]) if k is not None and shares[k] > 0 else (None, 0.0)
+
+
+def _fit_findings(result, noise: float):
+    """The residual against the corner noise: who explains it.
+
+    Returns ``(findings, notes, fits)``. Below :data:`FIT_RATIO_DOUBTFUL` nothing is fitted. Above it the
+    finer lens models and mrcal's board warp are fitted (:mod:`dtscal_lib.richer`); the lens model is blamed
+    (finding ``fit``, with the model to use) only when one explains at least :data:`LENS_SHARE` of the
+    residual above the noise; a board warp that does is named with its size in mm (``board_warp``);
+    otherwise the residual is the print and the detector's (a note, in words, with what it costs on the
+    ground), and only beyond :data:`UNEXPLAINED_RATIO_DOUBTFUL` / :data:`UNEXPLAINED_RATIO_BAD` does it
+    change the verdict.
+    """
+    from .richer import excess_share
+    ratio = result.sigma / noise
+    if not ratio > FIT_RATIO_DOUBTFUL:
+        return [], [], None
+    fits = _richer_fits(result, noise)
+    lens = {k: f for k, f in fits.items() if k != "warp"}
+    name, share = _best_lens(result, noise, lens)
+    warp = fits.get("warp")
+    wshare = excess_share(result.sigma, warp.sigma, noise) if warp is not None else 0.0
+    head = (f"the residuals (sigma {result.sigma:.3f} px per coordinate, RMS {result.rms:.3f} px) are {ratio:.1f} "
+            f"times the corner noise of these images ({noise:.3f} px, measured without a model)")
+    findings, notes = [], []
+    if name is not None and share >= LENS_SHARE and share >= wshare:
+        f = lens[name]
+        findings.append(Finding(
+            "fit", "bad" if ratio > FIT_RATIO_BAD else "doubtful",
+            f"{head}; {_LENS_WORDS[name]} brings sigma to {f.sigma:.3f} px ({100 * share:.0f} % of the residual "
+            f"above the noise): the {result.model} model does not follow this lens",
+            _LENS_ADVICE[name]))
+        return findings, notes, fits
+    warp_words = ""
+    if warp is not None:
+        mm = 1000.0 * warp.warp  # the board's unit is metres (dtscal_lib.boards)
+        warp_words = (f"a board warp as mrcal fits it (the middle of the board {mm[0]:+.2f} mm along its x axis, "
+                      f"{mm[1]:+.2f} mm along y, out of its plane) brings sigma to {warp.sigma:.3f} px "
+                      f"({100 * wshare:.0f} % of the excess)")
+    lens_words = (f"{' and '.join(_LENS_WORDS[k] for k in lens)} explain{'s' if len(lens) == 1 else ''} "
+                  f"{'at most ' if len(lens) > 1 else ''}{100 * share:.0f} %" if lens
+                  else "no finer lens model could be fitted")
+    # with fewer views than min_good_views the two warp terms trade off against the few poses
+    if warp is not None and wshare >= LENS_SHARE and result.n_views >= MIN_GOOD_VIEWS:
+        findings.append(Finding(
+            "board_warp", "bad" if ratio > UNEXPLAINED_RATIO_BAD else "doubtful",
+            f"{head}; the board is not flat: {warp_words}; {lens_words} of the excess",
+            "glue the printed board to a flat, rigid plate (glass, aluminium, thick acrylic) and calibrate again"))
+        return findings, notes, fits
+    excess = float(np.sqrt(max(result.sigma ** 2 - noise ** 2, 0.0)))
+    text = (f"{head}: {excess:.3f} px per coordinate is neither noise nor the lens model "
+            f"(fitted to these corners, {lens_words} of the excess{'; ' + warp_words if warp_words else ''}): "
+            "it is the print and the detector (corners pulled the same way in neighbouring corners)")
+    if ratio > UNEXPLAINED_RATIO_DOUBTFUL:
+        findings.append(Finding(
+            "unexplained_fit", "bad" if ratio > UNEXPLAINED_RATIO_BAD else "doubtful", text,
+            "look at the residual figures (dtscal calibrate-intrinsics --report DIR): a blurred or mis-detected "
+            "board, a board that moved during exposure, or a wrong square count"))
+    else:
+        notes.append(Finding("unexplained_fit", "good", text, ""))
+    return findings, notes, fits
+
+
+def _outlier_corners(result, obj_list, img_list, res):
+    """Single corners far off where the camera puts them: found, named, left out, the calibration repeated.
+
+    A corner is an outlier when its residual (a 2-D vector) is longer than :data:`OUTLIER_CORNER_Z` robust
+    standard deviations of the residual coordinates (``1.4826 * median |e|``) and than
+    :data:`OUTLIER_CORNER_MIN_PX`. Returns ``(finding, refit)``
+    or ``(None, None)``; more than :data:`OUTLIER_CORNER_MAX_SHARE` of the corners at once is not a few bad
+    corners but a pattern (the other rules say which).
+    """
+    e = np.concatenate(res)
+    scale = 1.4826 * float(np.median(np.abs(e)))
+    if not scale > 0:
+        return None, None, []
+    limit = max(OUTLIER_CORNER_Z * scale, OUTLIER_CORNER_MIN_PX)
+    hits = [(v, int(i), float(np.linalg.norm(r[i]))) for v, r in enumerate(res)
+            for i in np.flatnonzero(np.linalg.norm(r, axis=1) > limit)]
+    if not hits or len(hits) > max(1, OUTLIER_CORNER_MAX_SHARE * len(e)):
+        return None, None, []
+    keep = [np.ones(len(o), dtype=bool) for o in obj_list]
+    for v, i, _ in hits:
+        keep[v][i] = False
+    try:
+        fit = result.refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
+    except (DtscalError, cv2.error, np.linalg.LinAlgError):
+        return None, None, []
+    left = []
+    for v, i, size in hits:
+        c, r = grid_indices(obj_list[v])[i]
+        left.append({"view": int(v), "corner": int(i), "column": int(c), "row": int(r), "residual_px": float(size),
+                     "robust_sigmas": float(size / scale)})
+    names = [_corner_words(h) for h in left[:6]]
+    more = f" ... ({len(hits)} in all)" if len(hits) > 6 else ""
+    df = fit.K[0, 0] - result.K[0, 0]
+    return Finding(
+        "outlier_corners", "doubtful",
+        f"{len(hits)} corner(s) lie far from where the camera puts them ({'; '.join(names)}{more}; the limit is "
+        f"{limit:.2f} px: {OUTLIER_CORNER_Z:g} x {scale:.3f} px, the residuals' robust sigma, and at least "
+        f"{OUTLIER_CORNER_MIN_PX:g} px). Calibrated again without "
+        f"{'it' if len(hits) == 1 else 'them'}: RMS {result.rms:.3f} -> {fit.rms:.3f} px, fx {df:+.2f} px",
+        "use the calibration without these corners (shown above) or re-detect those views: a corner the "
+        "detector put on clutter, a reflection or the board's edge", sorted({v for v, _, _ in hits})), fit, left
+
+
+def _corner_words(h: dict) -> str:
+    return (f"view {h['view']} corner {h['corner']} (column {h['column']}, row {h['row']}): {h['residual_px']:.2f} px, "
+            f"{h['robust_sigmas']:.0f} sigma")
+
+
+def leave_out_outlier_corners(result):
+    """``result`` calibrated again without its outlier corners (``left_out_corners`` names them), or ``result``.
+
+    What ``dtscal calibrate-intrinsics`` and the live CALIBRATE do after dropping outlier views
+    (:func:`dtscal_lib.session.calibrate_without_outlier_views`). Nothing is left out when the far-off corners
+    are the echo of something else: a column or row offset in many views (:func:`_offset_findings`) or a lens the
+    model cannot follow (a finer lens model, fitted, explains the residual: :func:`_fit_findings`).
+    """
+    obj = [np.asarray(o, float)[:, :2] for o in result.object_points]
+    img = [np.asarray(p, float).reshape(-1, 2) for p in result.image_points]
+    res = residuals(result)
+    finding, fit, left = _outlier_corners(result, obj, img, res)
+    if fit is None:
+        return result
+    noise_raw, _ = corner_noise(obj, img)
+    noise = max(noise_raw, NOISE_FLOOR_PX) if np.isfinite(noise_raw) else max(result.sigma, NOISE_FLOOR_PX)
+    if (any(f.code == "fit" for f in _fit_findings(result, noise)[0])
+            or _offset_findings(result, obj, img, res, noise)):
+        return result
+    fit.left_out_corners = list(result.left_out_corners) + left
+    return fit
 
 
 def _neighbour_correlation(obj_list, res) -> float:
@@ -639,13 +850,8 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     pv = np.asarray(result.per_view_rms)
 
     ratio = result.sigma / noise
-    if ratio > FIT_RATIO_DOUBTFUL:
-        findings.append(Finding(
-            "fit", "bad" if ratio > FIT_RATIO_BAD else "doubtful",
-            f"the residuals (sigma {result.sigma:.3f} px per coordinate, RMS {result.rms:.3f} px) are "
-            f"{ratio:.1f} times the corner noise of these images ({noise:.3f} px, measured without a model)",
-            "the model does not explain the data: look at the findings below and the residual figures "
-            "(dtscal calibrate-intrinsics --report DIR)"))
+    fit_findings, notes, richer_fits = _fit_findings(result, noise)
+    findings += fit_findings
 
     limit = VIEW_OUTLIER_FACTOR * float(np.median(pv))
     bad_views = [int(v) for v in np.flatnonzero((pv > limit) & (pv / np.sqrt(2) > 2 * noise))]
@@ -658,12 +864,39 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
 
     line_findings = _offset_findings(result, obj, img, res, noise)
     findings += line_findings
+    if line_findings:  # a bent column or row is the cause of the residual: the fit rule only echoes it
+        for f in findings:
+            if f.code == "unexplained_fit":
+                f.severity, f.advice = "good", ""
+                notes.append(f)
+        findings = [f for f in findings if f.code != "unexplained_fit"]
     # a bad column or row also shows as radial and correlated residuals: report the cause, not its echoes
     radial = None if line_findings else _radial_finding(result, res, noise)
     if radial is not None:
+        lens_words = _richer_model(result, noise, richer_fits)
+        radial.advice = f"{lens_words}; {radial.advice}"
+        if lens_words.startswith("not the lens model"):  # the finer models were fitted and do not remove it
+            radial.message = radial.message.replace(
+                f"a radial pattern the {result.model} distortion model cannot absorb",
+                "a radial pattern that finer lens models fitted to the same corners do not remove (the print or "
+                "the detector)")
         findings.append(radial)
+    lens_blamed = any(f.code == "fit" for f in fit_findings)  # then far-off corners are the lens's echo
+    corner_finding, without_corners, _ = ((None, None, []) if lens_blamed or line_findings
+                                          else _outlier_corners(result, obj, img, res))
+    left_out = list(getattr(result, "left_out_corners", []) or [])
+    if corner_finding is None and left_out:
+        corner_finding = Finding(
+            "outlier_corners", "doubtful",
+            f"{len(left_out)} corner(s) lay far from where the camera puts them and were left out before this "
+            f"calibration ({'; '.join(_corner_words(h) for h in left_out[:6])}"
+            f"{f' ... ({len(left_out)} in all)' if len(left_out) > 6 else ''})",
+            "nothing to do for this calibration; re-detect those views or look at them: a corner the detector put "
+            "on clutter, a reflection or the board's edge", sorted({h["view"] for h in left_out}))
+    if corner_finding is not None:
+        findings.append(corner_finding)
     rho = _neighbour_correlation(obj, res)
-    if rho > NEIGHBOUR_CORRELATION and ratio > 1.2 and not line_findings:
+    if rho > NEIGHBOUR_CORRELATION and ratio > 1.2 and not line_findings and corner_finding is None:
         findings.append(Finding(
             # above 2x the noise the systematic part of the residual is larger than the noise itself
             # (sqrt(ratio^2 - 1) > 1.7): the parameters are biased far beyond their standard deviations
@@ -671,7 +904,8 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
             f"neighbouring corners share their error (correlation {rho:.2f} of adjacent residuals, 0 for noise) "
             f"and the residuals are {ratio:.1f} times the corner noise: a pattern the {result.model} model "
             "cannot absorb, which biases the parameters beyond their standard deviations",
-            f"{_richer_model(result)}; check that the board is flat and its squares are the size given"))
+            f"{_richer_model(result, noise, richer_fits)}; check that the board is flat and its squares are the "
+            "size given"))
 
     if result.n_views < MIN_GOOD_VIEWS:
         findings.append(Finding(
@@ -691,7 +925,8 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     counts = np.zeros((3, 3), dtype=int)
     np.add.at(counts, (ri, ci), 1)
     umap = cov = None
-    if uncertainty:
+    # the projection uncertainty propagates the kit's own solver's normal equations; OpenCV's models have none
+    if uncertainty and result.model in KIT_SOLVER_MODELS:
         try:
             cov = _uncertainty_inputs(result)
             umap = uncertainty_map(result, distance=distance, cov=cov)
@@ -708,9 +943,9 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
             "the distortion model cannot be inverted at the image corners: fitted without corners there, "
             "it folds over and does not describe the lens",
             f"hold the board next in the {help_region} of the image and in the other image corners"))
-    elif umap is not None and umap.corner_mean > CORNER_SIGMA_DOUBTFUL:
+    elif umap is not None and corner_severity(umap.corner_mean) != "good":
         findings.append(Finding(
-            "uncertainty", "bad" if umap.corner_mean > CORNER_SIGMA_BAD else "doubtful",
+            "uncertainty", corner_severity(umap.corner_mean),
             f"a pixel at the image corners can move by {umap.corner_mean:.2f} px (1 sigma) within the "
             "parameters' uncertainty",
             f"hold the board next in the {help_region} of the image (filling it, tilted), where the uncertainty "
@@ -722,8 +957,29 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
             cons = consequences(result, umap=umap, cov=cov)
         except (np.linalg.LinAlgError, DtscalError):
             cons = None
+    if cons is not None:
+        for n in notes + [f for f in findings if f.code in ("fit", "board_warp", "unexplained_fit")]:
+            n.message += _ground_cost(result, noise, cons)  # what the residual above the noise costs on the ground
     return Quality(verdict, findings, float(noise), n_noise, float(result.sigma), pv, res, umap, counts,
-                   help_region, spread, consequences=cons)
+                   help_region, spread, consequences=cons, notes=notes, without_outlier_corners=without_corners,
+                   richer=richer_fits)
+
+
+def corner_severity(corner_sigma_px: float) -> str:
+    """The verdict of the mean 1-sigma projection uncertainty at the image corners (pixels)."""
+    if corner_sigma_px > CORNER_SIGMA_BAD:
+        return "bad"
+    return "doubtful" if corner_sigma_px > CORNER_SIGMA_DOUBTFUL else "good"
+
+
+def _ground_cost(result, noise, cons) -> str:
+    """The residual that is not noise, carried onto the ground as the consequences' pixels are."""
+    excess = float(np.sqrt(max(result.sigma ** 2 - noise ** 2, 0.0)))
+    parts = [f"{100 * g['ahead_m']:.0f} cm ahead {excess * g['ground_sigma_cm'] / g['pixel_sigma_px']:.2g} cm"
+             for g in cons["ground"] if g["ground_sigma_cm"] and g["pixel_sigma_px"]]
+    if not parts:
+        return ""
+    return (f". On a Duckiebot a pixel error of that size moves a ground point {', '.join(parts)}")
 
 
 # =========================================================================== what it means for a robot
@@ -748,7 +1004,7 @@ def consequences(result, *, umap: UncertaintyMap | None = None, cov=None) -> dic
     The camera is put where a Duckiebot's is (:data:`NOMINAL_CAMERA_HEIGHT_M` above the ground,
     :data:`NOMINAL_CAMERA_PITCH_DEG` down, held fixed: only the intrinsics are in doubt). For each
     distance of :data:`CONSEQUENCE_DISTANCES_M` ahead of the axle, the ground point there is seen at a
-    pixel; that pixel's 1-sigma projection uncertainty (:func:`projection_uncertainty`, the honest
+    pixel; that pixel's 1-sigma projection uncertainty (:func:`projection_uncertainty`, the noise model
     covariance) is carried onto the ground through the mounting: ``ground_sigma_cm`` (worst direction)
     and ``forward_sigma_cm`` (along the robot's x). ``corner_sigma_px`` is the mean 1-sigma at the four
     image corners. ``relative_uncertainty`` is how uncertain these figures are themselves: a spread
@@ -795,14 +1051,14 @@ def explain(q: Quality) -> str:
     """The verdict, why, and what it means for a Duckiebot, as a few sentences (:meth:`Quality.meaning`)."""
     lines = [f"Verdict {_VERDICT_WORDS[q.verdict]}"]
     codes = {f.code for f in q.findings}
-    if "fit" in codes:
+    if codes & {"fit", "board_warp", "unexplained_fit"} or q.notes:
         ratio = q.fit_sigma / max(q.noise_sigma, NOISE_FLOOR_PX)
         lines.append(
             f"The residuals are {ratio:.1f}x the corner noise measured in these very images: part of every residual "
-            "is not noise but a pattern shared by neighbouring corners (a print that is not flat, a lens the "
-            "model cannot follow exactly, corners pulled the same way). More views of the same kind do not average "
-            "it away; the standard deviations are therefore measured from how much the views disagree with each "
-            "other, not from the noise alone.")
+            "is not noise but a pattern shared by neighbouring corners. More views of the same kind do not average "
+            "it away; the standard deviations of the parameters are therefore measured from how much the views "
+            "disagree with each other, not from the noise alone.")
+        lines += [n.message[:1].upper() + n.message[1:] + "." for n in q.notes]
     c = q.consequences
     if c:
         m = c["mounting"]

@@ -71,6 +71,8 @@ def fig_view_rms(result, quality: Quality | None = None) -> Figure:
     pv = np.asarray(result.per_view_rms)
     flagged = set(v for f in q.findings if f.code in ("outlier_views", "column_offset", "row_offset") for v in f.views)
     fig = CourseFigure(figsize=(8, 3.2), layout="constrained")
+    fig.alt = ("Each view's RMS reprojection error against what the corner noise predicts; views far above "
+                "the line fit worse than noise explains.")
     ax = fig.add_subplot()
     colours = ["#c62828" if v in flagged else "#4c72b0" for v in range(len(pv))]
     ax.bar(np.arange(len(pv)), pv, color=colours, width=0.8)
@@ -90,6 +92,7 @@ def fig_worst_residuals(result, quality: Quality | None = None, n: int = 4) -> F
     q = _q(result, quality)
     worst = list(np.argsort(-np.asarray(result.per_view_rms))[:n])
     fig = CourseFigure(figsize=(4.2 * len(worst), 3.6), layout="constrained")
+    fig.alt = "The residual vectors of the views that fit worst, magnified, one panel per view."
     big = max(float(np.abs(np.concatenate([q.residuals[v] for v in worst])).max()), 1e-12)
     scale = 25.0 / big  # the longest arrow is 25 px long on the image
     for k, v in enumerate(worst):
@@ -113,6 +116,7 @@ def fig_residual_histogram(result, quality: Quality | None = None) -> Figure:
     q = _q(result, quality)
     e = np.concatenate(q.residuals).ravel()
     fig = CourseFigure(figsize=(6, 3.4), layout="constrained")
+    fig.alt = "Histogram of the corners' reprojection residuals, in pixels."
     ax = fig.add_subplot()
     lim = max(4 * q.noise_sigma, float(np.quantile(np.abs(e), 0.995)))
     bins = np.linspace(-lim, lim, 61)
@@ -133,6 +137,8 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
     q = _q(result, quality)
     u = q.uncertainty
     fig = CourseFigure(figsize=(6.4, 5), layout="constrained")
+    fig.alt = ("Map over the image of the 1-sigma projection uncertainty in pixels (colour, log scale), the "
+                "observed corners on top and the value at each image corner labelled.")
     ax = fig.add_subplot()
     if u is None:
         ax.text(0.5, 0.5, "uncertainty not computed", ha="center", va="center", transform=ax.transAxes)
@@ -146,15 +152,22 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
     ax.plot(pts[:, 0], pts[:, 1], ",", color="w", alpha=0.5)
     for (x, y), s in zip(u.corners, u.corner_sigma):
         ax.text(x + (10 if x < 1 else -10), y + (22 if y < 1 else -12), "?" if np.isnan(s) else f"{s:.2f} px",
-                ha="left" if x < 1 else "right", color="w", fontsize=9, weight="bold")
+                ha="left" if x < 1 else "right", color="w", fontsize=9, weight="bold",
+                path_effects=[_outline()])  # white on any colour of the map: a dark outline keeps it legible
     _image_axes(ax, result.image_size)
-    where = "infinity" if not np.isfinite(u.distance) else f"{u.distance:.3g} (board units)"
+    where = "infinity" if not np.isfinite(u.distance) else f"{u.distance:.3g} m"
     corners = ("lens model not invertible there (grey)" if np.isnan(u.corner_mean)
                else f"{u.corner_mean:.2f} px (1 sigma)")
     ax.set_facecolor("0.8")
     ax.set_title(f"projection uncertainty, points at distance {where}\nimage corners: {corners}; "
                  f"more data would help most: {u.worst_region()}", fontsize=9)
     return fig
+
+
+def _outline():
+    from matplotlib import patheffects
+
+    return patheffects.withStroke(linewidth=2.5, foreground="k")
 
 
 def _log_norm(levels):
@@ -168,6 +181,7 @@ def fig_coverage(result, quality: Quality | None = None) -> Figure:
     q = _q(result, quality)
     w, h = result.image_size
     fig = CourseFigure(figsize=(6.4, 5), layout="constrained")
+    fig.alt = "Every observed corner on the image, with the count of corners in each ninth of the image."
     ax = fig.add_subplot()
     for v, p in enumerate(result.image_points):
         p = np.asarray(p).reshape(-1, 2)

@@ -117,4 +117,15 @@ CHECKS = {
         dict(name="returns float64 (N, 2)", weight=1, seed=640411, views=1, n=5, judge="dtype"),
         dict(name="inputs not modified", weight=2, seed=640417, views=1, n=5, judge="unchanged"),
     ],
+    "camera_height_pitch": [
+        # noise-free ground homographies of cameras placed by hand: every accepted formulation (lambda from the
+        # first column or the mean of both, nearest rotation or r3 = r1 x r2 as is, pitch from asin(-R[2, 2]) or
+        # atan2 of the optical axis) agrees to round-off (tests/grading_corpus_correct), hence atol 1e-6
+        dict(name="robot cameras 5-30 cm up, pitched 5-50 deg down", weight=4, seed=640421, views=4,
+             atol=1e-6, rtol=0.0),
+        dict(name="the same at random scale and sign of H", weight=3, seed=640423, views=4, random_scale=True,
+             atol=1e-6, rtol=0.0),
+        dict(name="returns float64 (2,)", weight=1, seed=640427, views=1, judge="dtype"),
+        dict(name="inputs not modified", weight=2, seed=640429, views=1, judge="unchanged"),
+    ],
 }

@@ -35,6 +35,8 @@ if [ "${1:-}" = "--test" ]; then
   bash scripts/install-mrcal.sh
   echo "setup: the browser for the UI tests" >&2
   bash scripts/install-browser.sh
+  echo "setup: JupyterHub's proxy (npm, into .hub/) for the hub test" >&2
+  bash scripts/install-hub.sh
   echo "setup: bubblewrap, the sandbox dtscal grade runs student code in" >&2
   bash scripts/install-sandbox.sh
 else

@@ -24,7 +24,8 @@ from ros_env import ros_ok, roscore  # noqa: F401 - fixtures: ROS 1 present (fai
 #: the two workers end together; every other file keeps its collection order after them
 LONGEST_FIRST = (
     "test_notebooks.py", "test_ros_live.py", "test_pipeline.py", "test_synth_regenerate.py", "test_plausibility.py",
-    "test_synth.py", "test_handout.py", "test_checkout_anywhere.py", "test_browser_live.py",
+    "test_synth.py", "test_handout.py", "test_checkout_anywhere.py", "test_browser_live.py", "test_hub.py",
+    "test_nbgrader_export.py",
     "test_outputs_portable.py", "test_report.py", "test_quality.py",
     "test_live_sources.py", "test_grading_sandbox.py", "test_notebook_text.py", "test_ui_calibrator.py",
     "test_ui_ros.py", "test_detect_real.py", "test_hostile_input.py", "test_grading_handout.py",

@@ -1,4 +1,4 @@
-"""The course layer (dtscal_lib.course): the fallback contract, loading student functions, figures' helpers."""
+"""The course layer (dtscal_lib.teaching.course): the fallback contract, loading student functions, figures' helpers."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from dtscal_lib import camera as cam
-from dtscal_lib.selfcheck import NOT_IMPLEMENTED, PASS
-from dtscal_lib.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
+from dtscal_lib.teaching.selfcheck import NOT_IMPLEMENTED, PASS
+from dtscal_lib.teaching.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
 from selfcheck_refs import (_quiet, p2g_no_divide, p2g_transposed, ref_intrinsics, ref_p2g, status,
                                    stub)
 
@@ -18,8 +18,8 @@ from pathlib import Path  # noqa: E402
 import nbformat  # noqa: E402
 
 from dtscal_lib import duckietown as dt  # noqa: E402
-from dtscal_lib import course as fig  # noqa: E402
-from dtscal_lib.release import student_notebook  # noqa: E402
+from dtscal_lib.teaching import course as fig  # noqa: E402
+from dtscal_lib.teaching.release import student_notebook  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 COURSE = {
@@ -170,7 +170,7 @@ def test_distort_image_is_undone_by_the_rectification_maps():
 def test_pinhole_explorer_renders_at_its_shown_size_and_names_the_function(capsys):
     import struct
 
-    from dtscal_lib.course.projection import EXPLORER_PX
+    from dtscal_lib.teaching.course.projection import EXPLORER_PX
 
     project = fig.use_or_fallback(stub, lambda K, R, t, X: cam.project_points(X, R, t, K),
                                   fallback_name="the kit's camera.project_points")

@@ -204,11 +204,13 @@ def test_cli_writes_gradescope_json_and_csv(tmp_path, capsys):
     for t in data["ada"]["tests"]:
         assert set(t) == {"name", "score", "max_score", "output", "visibility"}
     rows = list(csv.reader(out_csv.read_text().splitlines()))
-    assert rows[0] == ["student", "project_points", "board_ground_points", "pixel_to_ground", "total", "max", "notes"]
+    assert rows[0] == ["student", "project_points", "board_ground_points", "pixel_to_ground", "camera_height_pitch",
+                       "total", "max", "notes"]
     ada, bo = rows[1], rows[2]
-    assert ada[0] == "ada" and ada[1] == "10" and float(ada[2]) < 10 and ada[3] == "0" and ada[5] == "30"
+    assert ada[0] == "ada" and ada[1] == "10" and float(ada[2]) < 10 and ada[3] == "0" and ada[4] == "0"
+    assert ada[6] == "40"
     # the same maximum for everyone; what was not handed in is 0, and says so
-    assert bo[:6] == ["bo", "0", "0", "0", "0", "30"] and "05_extrinsic_calibration: not handed in" in bo[6]
+    assert bo[:7] == ["bo", "0", "0", "0", "0", "0", "40"] and "05_extrinsic_calibration: not handed in" in bo[7]
 
 
 def test_cli_single_notebook_table(tmp_path, capsys):

@@ -5,10 +5,10 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 import zipfile
 
 import pytest
+from handins import make_autograder, run_autograder, student_handin
 
 from dtscal_lib.cli import main as dtscal
 from nbtools import ROOT, SOLUTIONS
@@ -18,33 +18,11 @@ CORPUS = ROOT / "tests" / "grading_corpus"
 
 @pytest.fixture(scope="module")
 def autograder(tmp_path_factory):
-    base = tmp_path_factory.mktemp("gs")
-    bundle = base / "autograder.zip"
-    assert dtscal(["grade", "--gradescope-bundle", str(bundle)]) == 0
-    root = base / "autograder"
-    with zipfile.ZipFile(bundle) as z:
-        names = z.namelist()
-        z.extractall(root / "source")
-    assert {"setup.sh", "run_autograder", "grading/cases.py", "pyproject.toml"} <= set(names)
-    assert any(n.startswith("solutions/") for n in names) and any(n.startswith("dtscal_lib/grading/") for n in names)
-    assert not any("__pycache__" in n for n in names)
-    return root
+    return make_autograder(tmp_path_factory.mktemp("gs"))
 
 
 def _run(root, files):
-    sub = root / "submission"
-    if sub.exists():
-        for p in sub.iterdir():
-            p.unlink()
-    sub.mkdir(exist_ok=True)
-    for name, data in files.items():
-        (sub / name).write_bytes(data)
-    env = dict(os.environ, DTSCAL_AUTOGRADER_ROOT=str(root), DTSCAL_PYTHON=sys.executable,
-               PYTHONPATH=str(root / "source"))
-    run = subprocess.run(["bash", str(root / "source" / "run_autograder")], env=env, capture_output=True,
-                         text=True, timeout=600)
-    assert run.returncode == 0, run.stderr
-    return json.loads((root / "results" / "results.json").read_text())
+    return run_autograder(root, files)
 
 
 def test_run_autograder_grades_the_submission(autograder):
@@ -69,34 +47,8 @@ def test_run_autograder_writes_results_for_an_unusable_submission(autograder):
 # --------------------------------------------------------------------------- a student's hand-in, whole path
 def _student_handin(tmp_path):
     """A student's checkout: notebook 01 solved in workspace/ (plus a note of theirs), then `dtscal handin`."""
-    import contextlib
-    import io
-    import shutil
-    from unittest import mock
-
-    import nbformat
-
-    from dtscal_lib import release as rel
-    from dtscal_lib.course import workspace as ws
-    from nbtools import NOTEBOOKS
-
-    root = tmp_path / "student"
-    shutil.copytree(NOTEBOOKS, root / "notebooks")
-    wsdir = ws.ensure_workspace(root)
-    nb01 = wsdir / "01_pinhole_projection.ipynb"
-    solved = rel.inject_solutions(nbformat.read(str(nb01), as_version=4),
-                                  nbformat.read(str(SOLUTIONS / nb01.name), as_version=4))
-    solved.cells.insert(1, nbformat.v4.new_markdown_cell("my notes"))
-    nbformat.write(solved, str(nb01))
-    (wsdir / "backups" / "old").mkdir(parents=True)
-    shutil.copyfile(nb01, wsdir / "backups" / "old" / nb01.name)
-    out = io.StringIO()
-    with mock.patch("dtscal_lib.paths.repo_root", return_value=root), contextlib.redirect_stdout(out):
-        assert dtscal(["handin", "--name", "Ada Lovelace"]) == 0
-    z = root / "handin" / "Ada_Lovelace.zip"
-    assert f"wrote {z} with 6 notebook(s)" in out.getvalue()
+    z = student_handin(tmp_path, "Ada Lovelace")
     with zipfile.ZipFile(z) as zf:
-        assert sorted(zf.namelist()) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb"))  # nothing of the kit
         files = {n: zf.read(n) for n in zf.namelist()}
     return z, files
 
@@ -110,7 +62,10 @@ def _pinhole_full_marks(res):
 def test_handin_zip_is_graded_by_dtscal_grade_and_by_the_gradescope_bundle(autograder, tmp_path):
     z, files = _student_handin(tmp_path)
     _pinhole_full_marks(_run(autograder, files))  # Gradescope unpacks the uploaded zip into submission/
-    _pinhole_full_marks(_run(autograder, {z.name: z.read_bytes()}))  # the zip itself, if it arrives unpacked
+    res = _run(autograder, {z.name: z.read_bytes()})  # the zip itself, if it arrives unpacked
+    _pinhole_full_marks(res)
+    assert f"{z.name}: not a notebook" not in res["output"]  # graded, not called "not a notebook"
+    assert not list((autograder / "submission").glob("*.ipynb"))  # read with caps, never unpacked to disk
     out = tmp_path / "results.json"
     assert dtscal(["grade", str(z), "--json", str(out), "-q"]) == 0  # the instructor, on the file as handed in
     _pinhole_full_marks(json.loads(out.read_text()))

@@ -10,7 +10,7 @@ import sys
 import nbformat
 import pytest
 
-from dtscal_lib.release import inject_solutions
+from dtscal_lib.teaching.release import inject_solutions
 from nbtools import NOTEBOOKS, ROOT, SOLUTIONS
 
 NB = "01_pinhole_projection.ipynb"

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from dtscal_lib import release as rel
+from dtscal_lib.teaching import release as rel
 from nbtools import ROOT, SOLUTIONS
 from course_server import _free_port, _stop, check_student_view
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import nbformat
 import pytest
 
-from dtscal_lib.release import inject_solutions
+from dtscal_lib.teaching.release import inject_solutions
 from nbtools import (COURSE, NOTEBOOKS, SOLUTIONS, cell_errors, execute, execute_student_once,
                      exercise_functions, need, reports)
 

@@ -203,7 +203,8 @@ def test_projection_jacobian_matches_finite_differences(skew, fix_k3):
         e[k] = h
         G[:, k] = (f(x0 + e) - f(x0 - e)) / (2 * h)
     want = G @ C @ G.T
-    got = quality.projection_uncertainty(res, pix, distance=d)
+    # the propagation of a given intrinsic covariance (here the honest one; the verdict's default is the noise model's)
+    got = quality.projection_uncertainty(res, pix, distance=d, cov=(res.normal_blocks(), res.intrinsic_covariance()))
     for m in range(len(pix)):
         np.testing.assert_allclose(got[m], want[2 * m:2 * m + 2, 2 * m:2 * m + 2], rtol=1e-4, atol=1e-12)
 

@@ -122,6 +122,6 @@ def test_every_flag_it_names_exists():
     named = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]+)", checked_text()))
     named -= {f for line in _command_lines() if "python" in line.split()[0] for f in line.split()}
     # the hand-out's start.sh takes a few flags of its own (--update, --handin)
-    from dtscal_lib.release import START_SH
+    from dtscal_lib.teaching.release import START_SH
     flags |= {f for f in re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]+)", START_SH)}
     assert len(flags) > 20 and sorted(named - flags) == []

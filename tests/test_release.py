@@ -9,7 +9,7 @@ import nbformat
 import pytest
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 
-from dtscal_lib import release as rel
+from dtscal_lib.teaching import release as rel
 from dtscal_lib.errors import DtscalError
 from nbtools import NOTEBOOKS, ROOT, SOLUTIONS
 

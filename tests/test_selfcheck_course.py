@@ -1,4 +1,4 @@
-"""Tests of the course self-checks for notebooks 03-05 (dtscal_lib.selfcheck.zhang/distortion/ground).
+"""Tests of the course self-checks for notebooks 03-05 (dtscal_lib.teaching.selfcheck.zhang/distortion/ground).
 
 Each check must pass on a correct implementation (written here independently of the
 solution notebooks: OpenCV or dtscal_lib.camera wrapped, or a different derivation),
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from dtscal_lib import camera as cam
-from dtscal_lib.selfcheck import FAIL, NOT_IMPLEMENTED, PASS
-from dtscal_lib.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
+from dtscal_lib.teaching.selfcheck import FAIL, NOT_IMPLEMENTED, PASS
+from dtscal_lib.teaching.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
 from selfcheck_refs import _quiet, p2g_no_divide, p2g_transposed, ref_constraints, ref_intrinsics, ref_p2g, status, stub
 
 

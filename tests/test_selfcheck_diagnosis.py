@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dtscal_lib.release import solution_functions
-from dtscal_lib.selfcheck import (check_apply_homography, check_estimate_homography, check_project_points,
+from dtscal_lib.teaching.release import solution_functions
+from dtscal_lib.teaching.selfcheck import (check_apply_homography, check_estimate_homography, check_project_points,
                                   diagnosis)
 from nbtools import SOLUTIONS
 
@@ -79,7 +79,7 @@ def test_no_perspective_division_no_longer_points_elsewhere(capsys):
 
 
 def test_strict_mode_raises(monkeypatch, capsys):
-    from dtscal_lib.selfcheck import SelfCheckFailed
+    from dtscal_lib.teaching.selfcheck import SelfCheckFailed
 
     def stub(K, R, t, X):
         raise NotImplementedError

@@ -12,7 +12,7 @@ import pytest
 
 from dtscal_lib.boards import DUCKIETOWN_BOARD
 from dtscal_lib.poses import random_board_pose
-from dtscal_lib.release import solution_functions
+from dtscal_lib.teaching.release import solution_functions
 from nbtools import SOLUTIONS, need
 
 SEEDS = range(12)

@@ -9,8 +9,8 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from dtscal_lib import release as rel
-from dtscal_lib.course import workspace as ws
+from dtscal_lib.teaching import release as rel
+from dtscal_lib.teaching import workspace as ws
 from dtscal_lib.errors import DtscalError
 from nbtools import ROOT
 

@@ -3,6 +3,9 @@
 Gradescope unpacks the zip into ``/autograder/source``, runs ``setup.sh`` once when the
 image is built, then ``run_autograder`` for every submission: the student's files are in
 ``/autograder/submission`` and the grades go to ``/autograder/results/results.json``.
+Everything in the submission folder is that one student's (``dtscal grade --one-student``):
+notebooks, ``.py`` files, and the zip ``dtscal handin`` wrote, read as it is with the caps of
+:mod:`.archive` (never unpacked to disk).
 
 The zip holds the kit's library, the hidden cases (``grading/``) and the solution notebooks
 (references). ``setup.sh`` installs the library into a virtual environment and makes
@@ -63,11 +66,10 @@ PY="${{DTSCAL_PYTHON:-$ROOT/venv/bin/python}}"
 RESULTS="$ROOT/results/results.json"
 mkdir -p "$ROOT/results"
 rm -f "$RESULTS"
-# a `dtscal handin` zip that was not unpacked: its notebooks next to it (Gradescope unpacks uploaded zips itself)
-for z in "$ROOT"/submission/*.zip; do
-  [ -f "$z" ] && "$PY" -m zipfile -e "$z" "$ROOT/submission/" >/dev/null 2>&1
-done
-"$PY" -m dtscal_lib.cli grade "$ROOT/submission" --material "$ROOT/source" --json "$RESULTS" {assignment}-q \\
+# everything in submission/ is this one student's: notebooks, .py files, and a `dtscal handin` zip as it is
+# (read with size caps, never unpacked to disk whole)
+"$PY" -m dtscal_lib.cli grade "$ROOT/submission" --one-student submission --material "$ROOT/source" \\
+    --json "$RESULTS" {assignment}-q \\
     > "$ROOT/results/grade.log" 2>&1
 status=$?
 if [ ! -s "$RESULTS" ]; then
@@ -118,33 +120,6 @@ def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> 
                 z.write(root / f, f)
     os.replace(tmp, out)
     return out
-
-
-def unpack_zip_submission(path, into) -> Path:
-    """A submission zip (``dtscal handin``'s ``NAME.zip``) unpacked into ``into/NAME/``; other paths as they are.
-
-    ``dtscal grade NAME.zip`` then grades the folder as the student ``NAME``, as Gradescope, which
-    unpacks an uploaded zip into its submission folder, does. Only notebooks and .py files are
-    taken, each by its base name (no path in the zip can point outside ``into``).
-    """
-    path = Path(path)
-    if path.suffix.lower() != ".zip":
-        return path
-    if not path.is_file():
-        raise DtscalError(f"{path} does not exist: give the hand-in zip, a notebook or a folder")
-    folder = Path(into) / path.stem
-    folder.mkdir(parents=True, exist_ok=True)
-    try:
-        with zipfile.ZipFile(path) as z:
-            for info in z.infolist():
-                name = Path(info.filename).name
-                if info.is_dir() or not name.endswith((".ipynb", ".py")) or name.startswith("."):
-                    continue
-                (folder / name).write_bytes(z.read(info))
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise DtscalError(f"{path} is not a readable zip ({exc}); ask the student for `dtscal handin`'s file "
-                          "again") from None
-    return folder
 
 
 def _add_text(z: zipfile.ZipFile, name: str, text: str) -> None:

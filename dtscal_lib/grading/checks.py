@@ -22,9 +22,11 @@ import numpy as np
 from .. import duckietown as dt
 from ..boards import DUCKIETOWN_BOARD
 from ..camera import intrinsic_matrix, new_camera_matrix
+from ..camera import undistort_normalized as newton
 from ..errors import DtscalError
 from ..poses import board_homography, points_on_rays, random_board_pose
-from .sandbox import CheckRun
+from .metrics import K_max_px, apply_homography, pose_errors, shape_key, truth_rms_px
+from .sandbox import Call, CheckRun
 
 CAMERAS = {
     "duckie": intrinsic_matrix(307.7, 315.0, 329.7, 244.5),
@@ -67,8 +69,7 @@ def _img_span(K):
     return 2 * K[0, 2], 2 * K[1, 2]
 
 
-def _apply(H, pts):
-    return cv2.perspectiveTransform(np.asarray(pts, float).reshape(-1, 1, 2), np.asarray(H, float)).reshape(-1, 2)
+_apply = apply_homography
 
 
 def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
@@ -142,7 +143,6 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             K = dt.default_K()
             us, vs = np.meshgrid(np.r_[0:640:16, 639], np.r_[0:480:16, 479])
             xy_d = (np.column_stack([us.ravel(), vs.ravel(), np.ones(us.size)]) @ np.linalg.inv(K).T)[:, :2]
-            from ..camera import undistort_normalized as newton
             xy = newton(xy_d, d)
         else:
             xy = rng.uniform(-float(p.get("radius", 0.8)), float(p.get("radius", 0.8)), size=(n, 2))
@@ -164,6 +164,19 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             k = np.arange(cols * rows)
             truth.append(np.column_stack([x0 + (k // cols) * sq, y0 + (k % cols) * sq]))
         return [tuple(b) for b in boards], truth
+    if func == "camera_height_pitch":  # robot cameras placed by hand: the height and pitch are the truth
+        from ..teaching.selfcheck.diagnosis import robot_ground_homography
+
+        K = dt.default_P()[:, :3] if p.get("camera", "rectified") == "rectified" else CAMERAS[p["camera"]]
+        args, truth = [], []
+        for _ in range(views):
+            height, pitch = rng.uniform(0.05, 0.3), rng.uniform(5.0, 50.0)
+            H = robot_ground_homography(K, height, pitch, yaw_deg=rng.uniform(-4.0, 4.0), x=rng.uniform(0.0, 0.1))
+            if p.get("random_scale"):
+                H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.01, 100.0)
+            args.append((H, K.copy()))
+            truth.append(np.array([height, pitch]))
+        return args, truth
     raise MaterialError(f"no exercise function named {func}")
 
 
@@ -403,8 +416,6 @@ def judge_truth_H(built: Built, run: CheckRun):
         if not isinstance(c.value, np.ndarray) or c.value.shape != (3, 3) or not np.all(np.isfinite(c.value)):
             bad.append(f"case {i + 1}: expected a finite (3, 3) array, got {_describe_value(c.value)}")
             continue
-        from .tolerances import truth_rms_px
-
         err = truth_rms_px(c.value.astype(float), H_true, src)
         if not err <= limit:
             bad.append(f"case {i + 1}: your H maps the source points {num(err)} px (RMS) away from where the true "
@@ -428,8 +439,6 @@ def judge_truth_K(built: Built, run: CheckRun):
     v = c.value
     if not isinstance(v, np.ndarray) or v.shape != (3, 3) or not np.all(np.isfinite(v)):
         return 0.0, f"expected a finite (3, 3) array, got {_describe_value(v)}"
-    from .tolerances import K_max_px
-
     err = K_max_px(v.astype(float), K_true)
     if err <= limit:
         return 1.0, ""
@@ -448,8 +457,6 @@ def judge_truth_pose(built: Built, run: CheckRun):
     calls, why = _noisy_calls(built, run)
     if calls is None:
         return 0.0, why
-    from .tolerances import pose_errors
-
     tol = built.extra["tolerance"]
     max_deg, t_rel = tol["tolerance"]["deg"], tol["tolerance"]["t_rel"]
     bad = []
@@ -526,6 +533,9 @@ def about(func: str, spec: dict) -> str:
         words.append("the minimal 3 views")
     if spec.get("n") == 4 and func == "estimate_homography":
         words.append("the minimal 4 correspondences")
+    if func == "camera_height_pitch":
+        words.append("robot cameras at other heights and pitches: return [height in metres, pitch in degrees "
+                     "below the horizon]")
     if func == "board_ground_points":
         words.append("ground points of boards of other sizes and places: near-right corner first, "
                      "leftwards along the near row, then row by row away")
@@ -564,8 +574,6 @@ def build_check(func: str, spec: dict, reference: Callable, tolerances: dict | N
     built = Built(func, spec["name"], float(spec.get("weight", 1.0)), [(func, a) for a in args_list], refs,
                   JUDGES[judge_name], extra, form=judge_name in FORM_JUDGES)
     if judge_name.startswith("truth_"):
-        from .tolerances import shape_key
-
         extra["truth"] = truth
         extra["tolerance"] = (tolerances or {}).get(shape_key(func, spec))
         if not extra["tolerance"]:
@@ -577,8 +585,6 @@ def build_check(func: str, spec: dict, reference: Callable, tolerances: dict | N
 
 def _check_reference(built: Built, refs: list) -> None:
     """The reference solution must pass its own noisy check (else the tolerance or the solution is wrong)."""
-    from .sandbox import Call
-
     frac, why = built.judge(built, CheckRun(calls=[Call(ok=True, value=r) for r in refs]))
     if frac < 1:
         raise MaterialError(f"{built.name}: the reference solution fails its own noisy check: {why}")

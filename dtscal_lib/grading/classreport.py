@@ -14,7 +14,8 @@ import os
 import tempfile
 from pathlib import Path
 
-from .grade import GradeResult
+from .errors import GRADER_ERROR
+from .grade import GRADER_ERROR_STATUS, GradeResult
 from .material import ASSIGNMENTS
 
 #: score bands, as fractions of a function's points: [lo, hi)
@@ -35,6 +36,8 @@ def summarize(by_student: dict[str, list[GradeResult]]) -> tuple[dict, list[dict
     for student, results in sorted(by_student.items()):
         for r in results:
             for f in r.functions:
+                if f.status == GRADER_ERROR_STATUS:  # not graded yet: in no band (listed apart, see render)
+                    continue
                 d = dist.setdefault(f.name, {"bands": [0] * len(BANDS), "scores": [], "max": f.max_score})
                 frac = f.score / f.max_score if f.max_score else 0.0
                 d["bands"][next(i for i, (lo, hi, _) in enumerate(BANDS) if lo <= frac < hi)] += 1
@@ -76,6 +79,15 @@ def render(by_student: dict[str, list[GradeResult]], notes: dict | None = None) 
     if not mrows:
         mrows = ["<tr><td colspan='5'>no named mistake in this class</td></tr>"]
     nrows = [f"<tr><td>{_e(s)}</td><td>{_e(x)}</td></tr>" for s in sorted(notes) for x in notes[s]]
+    erows = [f"<tr><td>{_e(s)}</td><td>{_e(f.name)}</td><td>{_e(r.grader_error)}</td></tr>"
+             for s, rs in sorted(by_student.items()) for r in rs for f in r.functions
+             if f.status == GRADER_ERROR_STATUS]
+    errors = "" if not erows else f"""<h2>{_e(GRADER_ERROR)}</h2>
+<p>The grader itself failed on these functions (not the students' code): they have no score yet, and the
+totals of these students are incomplete. Rerun them.</p>
+<table id="grader-errors"><thead><tr><th scope="col">student</th><th scope="col">function</th>
+<th scope="col">what failed</th></tr></thead><tbody>{''.join(erows)}</tbody></table>
+"""
     mean_total = sum(totals) / len(totals) if totals else 0.0
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>dtscal grade: class report</title>
@@ -88,7 +100,7 @@ td.band {{ position: relative; min-width: 6em; }}
 </style></head><body>
 <h1>Class report</h1>
 <p id="summary">{n} student(s); mean total {mean_total:.1f} / {maximum:g} points.</p>
-<h2>Score distribution per function</h2>
+{errors}<h2>Score distribution per function</h2>
 <p>Number of students whose points on the function fall in each band.</p>
 <table id="distribution"><thead><tr><th scope="col">function</th>{heads}<th scope="col">mean</th></tr></thead>
 <tbody>{''.join(rows)}</tbody></table>

@@ -1,19 +1,22 @@
 """Find the submissions under a path and grade them, several at a time.
 
-A path is one submission (a notebook or .py file), one student's folder (notebooks named
-after the assignments, as Gradescope hands them over), or a class folder: one notebook/.py
-per student (``alice.ipynb``; the assignment from ``--assignment``) or one folder per
-student holding several notebooks.
+A path is one submission (a notebook, a .py file or a hand-in zip), one student's folder
+(notebooks named after the assignments, as Gradescope hands them over), or a class folder
+holding, in any mix, one folder per student (notebooks, or the zip ``dtscal handin`` wrote),
+one zip per student (the zip names the student) or one notebook/.py per student
+(``alice.ipynb``; the assignment from ``--assignment``). See :func:`roster`.
 """
 
 from __future__ import annotations
 
 import sys
+import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import DtscalError
+from .archive import read_zip
 from .grade import GradeResult, grade_file
 from .loader import load_submission
 from .material import ASSIGNMENTS, Material, assignment_of
@@ -27,6 +30,8 @@ class Item:
     path: Path
     assignment: str
     note: str = ""
+    #: the file as the class folder names it (``ada.zip/01_pinhole_projection.ipynb``)
+    shown: str = ""
 
 
 @dataclass
@@ -39,9 +44,23 @@ class Roster:
     students: list[str] = field(default_factory=list)
     notes: dict[str, list[str]] = field(default_factory=dict)
     assignments: list[str] = field(default_factory=list)
+    #: files of a class folder that belong to no student (``README.txt`` beside the students' folders)
+    unplaced: list[str] = field(default_factory=list)
+    _scratch: tempfile.TemporaryDirectory | None = None
 
     def note(self, student: str, text: str) -> None:
         self.notes.setdefault(student, []).append(text)
+
+    def scratch_folder(self) -> Path:
+        """A fresh private (0700) folder for one zip's members, removed by :meth:`cleanup`."""
+        if self._scratch is None:
+            self._scratch = tempfile.TemporaryDirectory(prefix="dtscal-handin-")
+        return Path(tempfile.mkdtemp(dir=self._scratch.name))
+
+    def cleanup(self) -> None:
+        if self._scratch is not None:
+            self._scratch.cleanup()
+            self._scratch = None
 
 
 #: course notebooks that exist but hold no graded exercise
@@ -73,8 +92,18 @@ def match_by_functions(path: Path) -> str | None:
     return hits[0] if best and len(hits) == 1 else None
 
 
-def roster(path, assignment: str | None = None) -> Roster:
-    """Every student and every file under ``path``: graded, or listed with the reason it is not."""
+def roster(path, assignment: str | None = None, *, one_student: str | None = None) -> Roster:
+    """Every student and every file under ``path``: graded, or listed with the reason it is not.
+
+    ``path`` is a notebook or .py file (one student, named by the file), a hand-in zip (one
+    student, named by the zip), one student's folder (notebooks named after the assignments),
+    or a class folder holding, in any mix: a folder per student (notebooks, .py files, the zip
+    ``dtscal handin`` wrote, or several of these), a zip per student (named by the zip), a
+    notebook per student (with ``--assignment``). ``one_student`` grades everything under
+    ``path``, zips included, as that one student's (Gradescope's submission folder).
+    Zips are read through :func:`.archive.read_zip` (streamed, capped) into the roster's
+    private scratch folder; call :meth:`Roster.cleanup` when done.
+    """
     path = Path(path)
     forced = None
     if assignment:
@@ -82,15 +111,21 @@ def roster(path, assignment: str | None = None) -> Roster:
         if forced is None:
             raise DtscalError(f"unknown assignment {assignment!r}; use one of {', '.join(ASSIGNMENTS)}")
     if not path.exists():
-        raise DtscalError(f"{path} does not exist: give a notebook, a .py file or a folder of submissions")
+        raise DtscalError(f"{path} does not exist: give a notebook, a .py file, a hand-in zip or a folder of "
+                          "submissions")
     r = Roster()
-    taken: dict[tuple[str, str], Path] = {}
+    taken: dict[tuple[str, str], str] = {}
 
-    def add(student: str, p: Path, rel: str) -> None:
+    def enrol(student: str) -> None:
         if student not in r.students:
             r.students.append(student)
+
+    def add(student: str, p: Path, rel: str) -> None:
+        enrol(student)
+        if p.suffix == ".zip":
+            return add_zip(student, p, rel)
         if p.suffix not in SUFFIXES:
-            r.note(student, f"{rel}: not a notebook (.ipynb) or .py file; not graded")
+            r.note(student, f"{rel}: not a notebook (.ipynb), .py file or hand-in zip; not graded")
             return
         why = _ungraded(p.name)
         named = assignment_of(p.name)
@@ -118,40 +153,60 @@ def roster(path, assignment: str | None = None) -> Roster:
                 return
             note = f"{rel}: graded as {a}: the name does not say which notebook it is; its functions are {a}'s"
         if (student, a) in taken:
-            r.note(student, f"{rel}: not graded: {taken[student, a].name} is already graded as {a}")
+            r.note(student, f"{rel}: not graded: {taken[student, a]} is already graded as {a}")
             return
-        taken[student, a] = p
+        taken[student, a] = rel
         if note:
             r.note(student, note)
-        r.items.append(Item(student, p, a, note))
+        r.items.append(Item(student, p, a, note, rel))
+
+    def add_zip(student: str, z: Path, rel: str) -> None:
+        enrol(student)
+        got = read_zip(z, r.scratch_folder())
+        for n in got.notes:
+            r.note(student, n)
+        if not got.members and not got.notes:
+            r.note(student, f"{rel}: the zip holds no notebook (.ipynb) or .py file; nothing graded")
+        for m in got.members:
+            add(student, m.path, f"{rel}/{m.name}")
 
     if path.is_file():
-        if path.suffix not in SUFFIXES:
-            raise DtscalError(f"{path} is not a notebook (.ipynb) or Python file (.py)")
-        add(path.stem, path, path.name)
+        if path.suffix not in (*SUFFIXES, ".zip"):
+            raise DtscalError(f"{path} is not a notebook (.ipynb), a Python file (.py) or a hand-in zip (.zip)")
+        add(one_student or path.stem, path, path.name)
+    elif one_student:
+        enrol(one_student)
+        files = _files(path)
+        if not files:
+            r.note(one_student, "no notebook or .py file handed in (nor a hand-in zip)")
+        for p in sorted(files, key=lambda p: (p.suffix == ".zip", str(p))):  # loose notebooks first
+            add(one_student, p, p.relative_to(path).as_posix())
     else:
         subdirs = sorted(d for d in path.iterdir() if d.is_dir() and not d.name.startswith((".", "__")))
         top = sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
         code = [p for p in top if p.suffix in SUFFIXES]
+        zips = [p for p in top if p.suffix == ".zip"]
         named = [p for p in code if assignment_of(p.name) or _ungraded(p.name)]
-        if code and not subdirs and len(named) == len(code) and not forced \
+        if code and not subdirs and not zips and len(named) == len(code) and not forced \
                 and len({assignment_of(p.name) for p in code}) == len(code):
             for p in top:  # one student's folder: notebooks named after the assignments
                 add(path.name, p, p.name)
         else:
             for p in top:
-                if p.suffix in SUFFIXES:
+                if p.suffix in (*SUFFIXES, ".zip"):  # one file, one student: named by the file
                     add(p.stem, p, p.name)
+                else:
+                    r.unplaced.append(f"{p.name}: not a notebook, .py file, hand-in zip or student folder; "
+                                      "no student to give it to, not graded")
             for d in subdirs:
                 files = _files(d)
-                if d.name not in r.students:
-                    r.students.append(d.name)
+                enrol(d.name)
                 if not files:
-                    r.note(d.name, f"{d.name}/: no notebook or .py file handed in")
-                for p in files:
+                    r.note(d.name, f"{d.name}/: no notebook or .py file handed in (nor a hand-in zip)")
+                for p in sorted(files, key=lambda p: (p.suffix == ".zip", str(p))):  # loose notebooks first
                     add(d.name, p, p.relative_to(path).as_posix())
             if not r.students:
-                raise DtscalError(f"{path} holds no notebook (.ipynb) or .py submission")
+                raise DtscalError(f"{path} holds no notebook (.ipynb), .py or hand-in zip (.zip) submission")
     r.assignments = [forced] if forced else sorted({i.assignment for i in r.items})
     for s in r.students:
         for a in r.assignments:
@@ -160,9 +215,13 @@ def roster(path, assignment: str | None = None) -> Roster:
     return r
 
 
+_KEEP: list[Roster] = []
+
+
 def discover(path, assignment: str | None = None) -> tuple[list[Item], list[str]]:
     """The submissions under ``path`` and the notes on everything else (student: note)."""
     r = roster(path, assignment)
+    _KEEP.append(r)  # the members of zips live in the roster's scratch folder: keep it until the process ends
     return r.items, [f"{s}: {n}" for s in r.students for n in r.notes.get(s, [])
                      if " graded as " not in n and not n.endswith("not handed in (0 points)")]
 
@@ -174,7 +233,10 @@ def grade_all(items: list[Item], material: Material, *, jobs: int = 1, progress:
         material.checks(a)  # references once, before the workers start
 
     def one(item: Item) -> GradeResult:
-        return grade_file(item.path, material, item.assignment, student=item.student, **limits)
+        res = grade_file(item.path, material, item.assignment, student=item.student, **limits)
+        if ".zip/" in item.shown:  # a zip's member: named as in the class folder, not by the scratch copy
+            res.submission = item.shown
+        return res
 
     bar = None
     if progress and len(items) > 1:

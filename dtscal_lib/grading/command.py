@@ -11,13 +11,21 @@ def add_parser(sub) -> None:
     """Register ``grade`` on the ``dtscal`` sub-command parser."""
     sp = sub.add_parser("grade", help="grade submissions against the hidden cases (instructor)")
     sp.add_argument("submission", nargs="?",
-                    help="a notebook, a .py file, one student's folder or a class folder (one entry per student)")
+                    help="a notebook, a .py file, a hand-in zip, one student's folder or a class folder (per "
+                         "student: a folder of notebooks or hand-in zips, a zip, or a notebook)")
     sp.add_argument("--assignment", help="01_pinhole_projection ... 05_extrinsic_calibration (default: from the "
                                          "file name)")
     sp.add_argument("--json", metavar="FILE", help="write Gradescope's results.json (a class: one entry per student)")
     sp.add_argument("--csv", metavar="FILE", help="class summary: one row per student, one column per function")
     sp.add_argument("--report", metavar="DIR", help="write the class report page (score distribution per "
                                                     "function, most frequent mistakes) to DIR/index.html")
+    sp.add_argument("--one-student", metavar="NAME",
+                    help="grade everything under the folder (zips included) as one student's hand-in (what the "
+                         "Gradescope bundle does with its submission folder)")
+    sp.add_argument("--roster", metavar="CSV|DIR", help="grade students' git repositories: a CSV file "
+                    "(student,repo[,commit]) or a folder of clones; each repository's workspace/ notebooks")
+    sp.add_argument("--deadline", metavar="2026-12-01T23:59", help="with --roster: grade each repository's last "
+                    "commit at or before this time (this machine's zone unless one is given)")
     sp.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (default 1)")
     sp.add_argument("--material", metavar="KIT", help="kit folder with grading/ and solutions/ (default: this kit)")
     sp.add_argument("--gradescope-bundle", metavar="OUT.zip", help="write the Gradescope autograder zip and exit")
@@ -30,10 +38,8 @@ def add_parser(sub) -> None:
 
 def cmd_grade(args) -> int:
     from ..errors import DtscalError
-    from .classroom import grade_all, roster
-    from .grade import not_handed_in
+    from .classroom import roster
     from .material import Material
-    from .report import gradescope, text, write_csv, write_json
 
     if args.gradescope_bundle:
         from .bundle import write_bundle
@@ -41,22 +47,48 @@ def cmd_grade(args) -> int:
         out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment)
         print(f"wrote {out}: upload it as the autograder of a Gradescope programming assignment")
         return 0
+    git_notes: dict[str, list[str]] = {}
+    if args.roster or args.deadline:  # git hand-in: clone each repository at its commit into a class folder
+        import tempfile
+
+        from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster
+
+        if not args.roster or args.submission:
+            raise DtscalError("--deadline goes with --roster CSV|DIR; --roster replaces the submission argument")
+        deadline = parse_deadline(args.deadline) if args.deadline else None
+        entries = read_roster(args.roster)
+        class_tmp = tempfile.TemporaryDirectory(prefix="dtscal-roster-class-")  # noqa: F841 (kept until graded)
+        if deadline is not None and not args.quiet:
+            print(f"grading {len(entries)} repositories at the {deadline_now_note(deadline)}", file=sys.stderr)
+        for co in checkout_roster(entries, class_tmp.name, deadline=deadline):
+            git_notes[co.student] = co.notes
+        args.submission = class_tmp.name
     if not args.submission:
         raise DtscalError("give a submission (notebook, .py file or folder), or --gradescope-bundle OUT.zip")
     if not 1 <= args.jobs <= 64:
         raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
     validate_limits(args.wall, args.cpu, args.mem)
-    import tempfile
-
-    from .bundle import unpack_zip_submission
-
     material = Material.load(args.material)
-    unpacked = tempfile.TemporaryDirectory(prefix="dtscal-handin-")  # a hand-in zip (`dtscal handin`)
-    r = roster(unpack_zip_submission(args.submission, unpacked.name), args.assignment)
+    r = roster(args.submission, args.assignment, one_student=args.one_student)
+    for student, notes in git_notes.items():  # which commit was graded, or why none: first in the row
+        r.notes[student] = notes + r.notes.get(student, [])
+    try:
+        return _grade_roster(args, r, material)
+    finally:
+        r.cleanup()  # the members taken from hand-in zips
+
+
+def _grade_roster(args, r, material) -> int:
+    from .grade import not_handed_in
+    from .classroom import grade_all
+    from .report import grader_errors, gradescope, text, write_csv, write_json
+
+    for n in r.unplaced:
+        print(f"not graded: {n}", file=sys.stderr)
     for student in r.students:  # also in the CSV and JSON, next to the student's grades
         for n in r.notes.get(student, []):
             print(f"{student}: {n}", file=sys.stderr)
-    from .sandbox import GRADER_ERROR, barriers
+    from .sandbox import barriers
 
     held = barriers()  # which barriers hold around each submission on this machine (also in results.json)
     print(f"sandbox: {held['mode']}" + ("" if held["mode"] == "bubblewrap" else f" -- {held['filesystem']}"),
@@ -80,20 +112,27 @@ def cmd_grade(args) -> int:
             write_json(args.json, {**gradescope(by_student[s], r.notes.get(s, [])), "sandbox": held})
         else:
             write_json(args.json, {"students": {s: gradescope(rs, r.notes.get(s, []))
-                                                for s, rs in sorted(by_student.items())}, "sandbox": held})
+                                                for s, rs in sorted(by_student.items())},
+                                   **({"not_graded": list(r.unplaced)} if r.unplaced else {}), "sandbox": held})
     if args.csv:
         write_csv(args.csv, by_student, r.notes)
     if args.report:
         from .classreport import write_report
 
-        page = write_report(args.report, by_student, r.notes)
+        notes = dict(r.notes)
+        if r.unplaced:
+            notes["(class folder)"] = list(r.unplaced)
+        page = write_report(args.report, by_student, notes)
         print(f"class report: {page}", file=sys.stderr)
-    if len(by_student) > 1:
-        print(f"graded {len(results)} submission(s) of {len(by_student)} student(s)"
+    nothing = [s for s in r.students if not any(i.student == s for i in r.items)]
+    if len(by_student) > 1 or nothing:
+        print(f"graded {len(results)} notebook(s) of {len(by_student)} student(s), every student in the results"
+              + (f"; nothing graded for {len(nothing)}: {', '.join(nothing[:10])}"
+                 + (" ..." if len(nothing) > 10 else "") if nothing else "")
               + (f"; summary in {args.csv}" if args.csv else ""), file=sys.stderr)
-    failed = [f"{x.student} {x.assignment}" for x in results if any(n.startswith(GRADER_ERROR) for n in x.notes)]
-    if failed:  # never a silent zero: the instructor reruns these
-        print(f"{GRADER_ERROR}: {len(failed)} submission(s) could not be graded: {', '.join(failed[:20])}",
-              file=sys.stderr)
+    failed = grader_errors(by_student)
+    if failed:
+        print(f"not graded: grader error, rerun: {len(failed)} student(s) ({', '.join(failed[:10])}); their "
+              "other grades stand. Rerun these students (a grader error is never the student's 0).", file=sys.stderr)
         return 3
     return 0

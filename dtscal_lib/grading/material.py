@@ -15,6 +15,7 @@ from pathlib import Path
 from ..errors import DtscalError
 from .checks import Built, MaterialError, build_check
 from .loader import load_submission, useful_import
+from .metrics import load as load_tolerances
 
 #: the exercise notebooks and the functions each one grades
 ASSIGNMENTS: dict[str, tuple[str, ...]] = {
@@ -23,7 +24,7 @@ ASSIGNMENTS: dict[str, tuple[str, ...]] = {
     "03_intrinsic_calibration": ("intrinsic_constraints", "intrinsics_from_homographies",
                                  "extrinsics_from_homography"),
     "04_distortion_rectification": ("distort_normalized", "undistort_normalized", "rectification_maps"),
-    "05_extrinsic_calibration": ("board_ground_points", "pixel_to_ground"),
+    "05_extrinsic_calibration": ("board_ground_points", "pixel_to_ground", "camera_height_pitch"),
 }
 
 
@@ -99,8 +100,6 @@ class Material:
             for f in funcs:
                 if not specs.get(f):
                     raise MaterialError(f"grading/cases.py has no checks for {f} ({a})")
-        from .tolerances import load as load_tolerances
-
         try:
             tolerances = load_tolerances(root)
         except ValueError as exc:

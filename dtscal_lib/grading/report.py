@@ -8,8 +8,24 @@ import os
 import tempfile
 from pathlib import Path
 
-from .grade import GradeResult
+from .errors import GRADER_ERROR
+from .grade import GRADER_ERROR_STATUS, GradeResult
 from .material import ASSIGNMENTS
+
+#: a spreadsheet reads a cell starting with one of these as a formula (or, for tab and CR, as the
+#: start of another cell): OWASP's "CSV Injection" page prescribes a leading single quote
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value: str) -> str:
+    """``value`` safe in a spreadsheet: a leading ``'`` when it would be read as a formula (OWASP)."""
+    value = str(value)
+    return "'" + value if value.startswith(FORMULA_START) else value
+
+
+def grader_errors(by_student: dict[str, list[GradeResult]]) -> list[str]:
+    """The students with a function the grader could not run (to rerun), sorted."""
+    return sorted(s for s, rs in by_student.items() if any(r.grader_error for r in rs))
 
 
 def text(res: GradeResult) -> str:
@@ -19,7 +35,7 @@ def text(res: GradeResult) -> str:
     lines += [f"  note: {n}" for n in res.notes]
     for f in res.functions:
         lines.append(f"  {f.name}: {f.score:g} / {f.max_score:g}" + (f"  [{f.status}]" if f.status != "graded" else ""))
-        if f.status in ("not implemented", "missing", "academic honesty"):
+        if f.status in ("not implemented", "missing", "academic honesty", GRADER_ERROR_STATUS):
             lines.append(f"      {f.tests[0].output}")
             continue
         if f.diagnosis:
@@ -36,6 +52,13 @@ def gradescope(results: list[GradeResult], notes: list[str] = ()) -> dict:
     """Gradescope's ``results.json`` for one student (one or several notebooks), with the
     notes on the student's files that were not graded (and why)."""
     tests, out = [], list(notes)
+    if any(r.grader_error for r in results):
+        out.insert(0, f"{GRADER_ERROR}: the grader itself failed on part of this submission (not your code); "
+                      "those checks are not graded yet and will be graded when the instructor reruns them")
+    if not results:
+        out.insert(0, "The autograder could not grade this submission: it holds no course notebook. Upload your "
+                      "notebook(s) under their course names (for example 01_pinhole_projection.ipynb) or the zip "
+                      "`dtscal handin` wrote.")
     for res in results:
         out += [f"{res.assignment}: {n}" for n in res.notes]
         for f in res.functions:
@@ -44,8 +67,12 @@ def gradescope(results: list[GradeResult], notes: list[str] = ()) -> dict:
                 d["name"] = f"{res.assignment} / {d['name']}" if len(results) > 1 else d["name"]
                 extra = f.diagnosis if f.diagnosis and t.score < t.max_score else ""
                 d["output"] = "\n".join(x for x in (extra, d["output"]) if x)
+                if f.status == GRADER_ERROR_STATUS:  # not a 0 of the student's: a status of its own
+                    d["status"] = "failed"
+                    d["extra_data"] = {"status": GRADER_ERROR_STATUS}
                 tests.append(d)
     return {
+        **({"extra_data": {"status": GRADER_ERROR_STATUS}} if any(r.grader_error for r in results) else {}),
         "score": round(sum(r.score for r in results), 2),
         "execution_time": round(sum(r.execution_time for r in results), 2),
         "output": "\n".join(out) if out else f"graded {len(results)} notebook(s) with dtscal grade",
@@ -66,7 +93,11 @@ def write_json(path, obj) -> Path:
 
 def write_csv(path, by_student: dict[str, list[GradeResult]], notes: dict | None = None) -> Path:
     """One row per student (also those with nothing graded), one column per graded function,
-    then total, maximum (the class's: the same for everyone) and the notes on that student's files."""
+    then total, maximum (the class's: the same for everyone) and the notes on that student's files.
+
+    A function the grader could not run reads ``grader error`` (and the total ``grader error``
+    too: it is not known yet), never 0. Text cells are escaped against formula injection
+    (:func:`csv_cell`)."""
     notes = notes or {}
     funcs = [f for a, fs in ASSIGNMENTS.items() for f in fs
              if any(r.assignment == a for rs in by_student.values() for r in rs)]
@@ -79,9 +110,12 @@ def write_csv(path, by_student: dict[str, list[GradeResult]], notes: dict | None
         w = csv.writer(fh)
         w.writerow(["student", *funcs, "total", "max", "notes"])
         for student in sorted(by_student):
-            scores = {f.name: f.score for r in by_student[student] for f in r.functions}
+            cells = {f.name: (GRADER_ERROR_STATUS if f.status == GRADER_ERROR_STATUS else f"{f.score:g}")
+                     for r in by_student[student] for f in r.functions}
             total = sum(r.score for r in by_student[student])
+            failed = any(r.grader_error for r in by_student[student])
             extra = [f"{r.assignment}: {n}" for r in by_student[student] for n in r.notes]
-            w.writerow([student, *[f"{scores.get(f, 0):g}" for f in funcs], f"{total:g}", f"{maximum:g}",
-                        "; ".join([*notes.get(student, []), *extra])])
+            w.writerow([csv_cell(student), *[cells.get(f, "0") for f in funcs],
+                        GRADER_ERROR_STATUS if failed else f"{total:g}", f"{maximum:g}",
+                        csv_cell("; ".join([*notes.get(student, []), *extra]))])
     return path

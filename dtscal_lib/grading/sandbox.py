@@ -56,9 +56,11 @@ from pathlib import Path
 import numpy as np
 
 from . import seccomp
+from .errors import GRADER_ERROR, GraderError
 from .harness import ANSWER_MARK, MAX_ANSWER_BYTES, MAX_BLOBS, MAX_HEADER_BYTES, CheckJob, SandboxJob
 
-__all__ = ["CheckJob", "SandboxJob", "Call", "CheckRun", "SandboxRun", "GraderError", "run_calls", "barriers"]
+__all__ = ["CheckJob", "SandboxJob", "Call", "CheckRun", "SandboxRun", "GraderError", "GRADER_ERROR", "run_calls",
+           "barriers"]
 
 #: default limits, per check (wall-clock and CPU seconds) and per submission (memory)
 WALL_S, CPU_S, MEM_MB, OUTPUT_CHARS = 10.0, 8, 2048, 2000
@@ -72,7 +74,6 @@ MAX_WALL_S, MAX_CPU_S, MIN_MEM_MB = 600.0, 600, 1024
 TMPFS_MB = 64
 #: a sandbox that fails on the grader's side is started again this many times
 RETRIES = 3
-GRADER_ERROR = "not graded: grader error, rerun"
 
 
 def validate_limits(wall_s, cpu_s, mem_mb) -> None:
@@ -105,10 +106,6 @@ MODE: str | None = None
 #: time allowed for starting the sandbox and loading the submission
 LOAD_WALL_S = 30.0
 MAX_ARRAY_BYTES = MAX_ANSWER_BYTES
-
-
-class GraderError(RuntimeError):
-    """The sandbox failed on the grader's side (did not start, died, broke its protocol)."""
 
 
 @dataclass

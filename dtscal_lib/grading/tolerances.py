@@ -26,16 +26,27 @@ import argparse
 import json
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
+
+from .checks import inputs_and_truth
+from .material import find_material
+from .metrics import (  # noqa: F401 - the metrics and the tolerance file, as this script's users know them
+    NOISY_JUDGES,
+    SHAPE_KEYS,
+    K_max_px,
+    load,
+    pose_errors,
+    rotation_deg,
+    shape_key,
+    tolerance_file,
+    truth_rms_px,
+)
 
 #: Monte Carlo draws per noisy check, and the margin over the largest error they reach
 SEEDS, MARGIN = 10000, 1.25
 #: the draws use seeds SEED0, SEED0 + 1, ... (never a case's own seed range, 640xxx)
 SEED0 = 10_000_000
-#: the check parameters that shape the inputs (name, weight, seed and judge settings do not)
-SHAPE_KEYS = ("views", "n", "sigma", "camera", "offset", "span", "random_scale")
 #: the statistic each noisy judge compares with its tolerance, and its unit
 STATISTICS = {
     "estimate_homography": ("truth_rms_px", "RMS distance between your H and the true H applied to the case's "
@@ -45,12 +56,6 @@ STATISTICS = {
     "extrinsics_from_homography": ("pose", "rotation angle between your R and the true R, in degrees; distance "
                                            "between your t and the true t relative to |t|"),
 }
-NOISY_JUDGES = ("truth_H", "truth_K", "truth_pose")
-
-
-def shape_key(func: str, spec: dict) -> str:
-    """The key of a check in the tolerance file: function and input-shaping parameters."""
-    return func + json.dumps({k: spec[k] for k in SHAPE_KEYS if k in spec}, sort_keys=True)
 
 
 # --------------------------------------------------------------------------- accepted formulations
@@ -164,29 +169,7 @@ FORMULATIONS = {
 }
 
 
-# --------------------------------------------------------------------------- statistics
-def rotation_deg(Ra, Rb) -> float:
-    """Angle of the rotation taking ``Rb`` to ``Ra``, in DEGREES."""
-    return float(np.degrees(np.arccos(np.clip((np.trace(np.asarray(Ra).T @ np.asarray(Rb)) - 1) / 2, -1.0, 1.0))))
-
-
-def truth_rms_px(H, H_true, src) -> float:
-    from .checks import _apply
-
-    return float(np.sqrt(np.mean(np.sum((_apply(H, src) - _apply(H_true, src)) ** 2, axis=1))))
-
-
-def K_max_px(K, K_true) -> float:
-    idx = ([0, 0, 0, 1, 1], [0, 1, 2, 1, 2])
-    return float(np.abs(np.asarray(K, float)[idx] - np.asarray(K_true, float)[idx]).max())
-
-
-def pose_errors(R, t, R_true, t_true) -> tuple[float, float]:
-    """(rotation error in degrees, |t - t_true| / |t_true|)."""
-    t = np.asarray(t, float).reshape(3)
-    return rotation_deg(R, R_true), float(np.linalg.norm(t - t_true) / np.linalg.norm(t_true))
-
-
+# --------------------------------------------------------------------------- statistics (the metrics: .metrics)
 def errors_of(func: str, answer_of, args_list, truth) -> list[dict]:
     """The statistic of ``answer_of(*args)`` on each call of one drawn case."""
     out = []
@@ -209,8 +192,6 @@ def errors_of(func: str, answer_of, args_list, truth) -> list[dict]:
 def derive(func: str, spec: dict, seeds: int = SEEDS, seed0: int = SEED0) -> dict:
     """Monte Carlo over ``seeds`` draws of the case generator: the largest error of every
     accepted formulation, and the tolerance (largest of all times MARGIN)."""
-    from .checks import inputs_and_truth
-
     worst: dict[str, dict[str, float]] = {name: {} for name in FORMULATIONS[func]}
     all_values: dict[str, list[float]] = {}
     for k in range(seeds):
@@ -245,16 +226,6 @@ def noisy_specs(checks: dict) -> list[tuple[str, dict]]:
     return [(func, spec) for func, specs in checks.items() for spec in specs if spec.get("judge") in NOISY_JUDGES]
 
 
-def tolerance_file(root) -> Path:
-    return Path(root) / "grading" / "tolerances.json"
-
-
-def load(root) -> dict:
-    """The stored tolerances of the kit at ``root`` (empty when the file is absent)."""
-    f = tolerance_file(root)
-    return json.loads(f.read_text()) if f.is_file() else {}
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--material", default=None, help="kit folder (default: this kit)")
@@ -262,8 +233,6 @@ def main(argv=None) -> int:
     ap.add_argument("--write", action="store_true", help="write grading/tolerances.json")
     a = ap.parse_args(argv)
     import runpy
-
-    from .material import find_material
 
     root = find_material(a.material)
     checks = runpy.run_path(str(root / "grading" / "cases.py"))["CHECKS"]

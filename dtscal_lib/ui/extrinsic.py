@@ -47,14 +47,17 @@ class LiveExtrinsics(ExtrinsicDriver):
         there is one)
     board, robot, calibration_dir, realtime, loop, autostart : as for the calibrator; a
         recording loops by default (the robot stands still on the board)
+    robot_type : ``"duckiebot"`` or ``"dd24"``, when the board does not say which robot it is
+        (:mod:`dtscal_lib.profiles`; ``--robot-type`` of the command line)
     """
 
     def __init__(self, source, intrinsics, *, board: Board = DUCKIETOWN_BOARD, robot: str | None = None,
                  calibration_dir="calibrations", realtime: bool = True, loop: bool = True,
-                 autostart: bool = True):
+                 autostart: bool = True, robot_type: str | None = None):
         import ipywidgets as w
 
-        super().__init__(source, intrinsics, board=board, robot=robot, realtime=realtime, loop=loop)
+        super().__init__(source, intrinsics, board=board, robot=robot, realtime=realtime, loop=loop,
+                         robot_type=robot_type)
         lay = w.Layout
         self.status = w.HTML(render.message_html(f"connecting to {self.spec} ..."))
         self.image = w.Image(format="jpeg", layout=lay(width="480px"))

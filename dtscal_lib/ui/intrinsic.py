@@ -28,6 +28,7 @@ Examples
 from __future__ import annotations
 
 from ..boards import DUCKIETOWN_BOARD, Board
+from ..camera import DIST_MODELS
 from ..coverage import CoverageTracker
 from ..detect import draw_detection
 from ..session import robot_name
@@ -53,7 +54,8 @@ class LiveCalibrator(IntrinsicDriver):
     board : the calibration board (default Duckietown's 7x5 inner corners, 31 mm)
     robot : robot name for the files (default: from the source)
     calibration_dir : folder that receives ``camera_intrinsic/<ROBOT>.yaml`` on an offline COMMIT
-    model : ``"plumb_bob"`` (ROS default) or ``"radial2"``
+    model : ``"plumb_bob"`` (ROS default), ``"radial2"``, ``"rational_polynomial"`` or ``"equidistant"`` (ROS's
+        other two, calibrated by OpenCV)
     realtime, loop : recordings: play at the recorded rate (or as fast as possible); replay at the end
     autostart : start the frame loop at once
     """
@@ -83,6 +85,9 @@ class LiveCalibrator(IntrinsicDriver):
                                                  ("calibration folder", "folder")],
                                         value="ros" if ros else "folder", description="commit to")
         self.robot_text = w.Text(value=self.robot, description="robot")
+        # the lens model of the next CALIBRATE (ROS's calibrator: plumb_bob, rational_polynomial, equidistant)
+        self.model_choice = w.Dropdown(options=list(DIST_MODELS), value=model, description="lens model")
+        self.model_choice.observe(lambda ch: self.set_model(ch["new"]), "value")
         self.folder_text = w.Text(value=str(calibration_dir), description="folder",
                                   layout=lay(width="420px"))
         self.archive_text = w.Text(value=f"{self.robot}_session.zip", description="archive",
@@ -101,7 +106,7 @@ class LiveCalibrator(IntrinsicDriver):
             w.HBox([w.VBox([self.bars, self.count], layout=lay(width="330px")),
                     w.VBox([w.HBox([self.calibrate_button, self.commit_button, self.save_button,
                                     self.reconnect_button]), self.commit_target, self.robot_text,
-                                    self.keep_anyway])]),
+                                    self.model_choice, self.keep_anyway])]),
             w.HTML("<b>samples kept</b> (click a sample's button to drop it)"), self.thumb_box,
             self.folder_text, self.archive_text, self.message,
             w.HTML("<b>results</b>"), self.results,
@@ -193,7 +198,9 @@ class LiveCalibrator(IntrinsicDriver):
         super()._verdict(result, quality)
         verdict = verdict_html(quality)
         if verdict:
-            self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from, verdict)
+            against = self.compare_with_robot(self.folder_text.value.strip() or ".")
+            self.results.value = render.calibration_html(result, self.dropped, self._calibrating_from, verdict,
+                                                         against)
 
     def _calibrate_ended(self) -> None:
         self.calibrate_button.disabled = not self.background.can_start()

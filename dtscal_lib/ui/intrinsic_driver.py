@@ -180,6 +180,47 @@ class IntrinsicDriver(LoopDriver):
     def _calibrate_ended(self) -> None:
         pass
 
+    def set_model(self, model: str) -> None:
+        """The lens model of the next CALIBRATE (one of :data:`dtscal_lib.camera.DIST_MODELS`)."""
+        from ..camera import DIST_MODELS
+
+        if model not in DIST_MODELS:
+            raise DtscalError(f"lens model must be one of {DIST_MODELS}, got {model!r}")
+        self.model = self.session.model = model
+
+    # ------------------------------------------------------------------ the new calibration against the robot's file
+    def robot_file(self, folder) -> tuple[calib_files.IntrinsicCalibration, str]:
+        """The robot's current intrinsic file: ``folder/camera_intrinsic/<ROBOT>.yaml``, else the folder's
+        ``default.yaml``, else Duckietown's factory calibration (what a robot without its own file uses)."""
+        for name in (self.robot, "default"):
+            try:
+                path = calib_files.intrinsic_path(folder, name)
+            except DtscalError:  # not a robot name a file can have
+                continue
+            if path.exists():
+                return calib_files.load_intrinsics(path), str(path)
+        from .. import duckietown as dt
+
+        return (calib_files.IntrinsicCalibration.from_dict(dt.DEFAULT_INTRINSICS, "Duckietown's default"),
+                "Duckietown's factory default.yaml")
+
+    def compare_with_robot(self, folder) -> str | None:
+        """One sentence: how far the new calibration is from the robot's current file (mrcal's projection
+        difference after the aligning rotation, :mod:`dtscal_lib.compare`), judged by the new one's uncertainty;
+        None before CALIBRATE."""
+        from ..compare import projection_difference
+
+        result = self.result
+        if result is None:
+            return None
+        try:
+            current, where = self.robot_file(folder)
+            comp = projection_difference(current, result, names=(where, "new"))
+        except DtscalError as exc:
+            return f"Cannot compare with the robot's file: {exc}"
+        other = "the robot's file (" + where + ")"
+        return f"The new calibration {comp.sentence(other)}."
+
     # ------------------------------------------------------------------ COMMIT, SAVE, LOAD: (message, kind)
     def commit_to(self, folder: str, *, keep_anyway: bool, target: str) -> tuple[str, str]:
         """COMMIT through the session's gate: the folder's ``camera_intrinsic/<ROBOT>.yaml``, then (``target``

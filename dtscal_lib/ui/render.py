@@ -101,7 +101,11 @@ def error_chart_svg(per_view_rms, dropped_positions=(), width: int = 360, height
             f'<text x="{width - 90}" y="{height - 2}" font-size="9">sample 1..{n}</text>' + "".join(bars) + "</svg>")
 
 
-def calibration_html(result, dropped: list[int], n_samples: int, verdict: str | None = None) -> str:
+_COEFFS = {"rational_polynomial": "[k1, k2, p1, p2, k3, k4, k5, k6]", "equidistant": "[k1, k2, k3, k4]"}
+
+
+def calibration_html(result, dropped: list[int], n_samples: int, verdict: str | None = None,
+                     against: str | None = None) -> str:
     """The results panel of the live calibrator for a ``CalibrationResult``."""
     K, d = result.K, np.asarray(result.dist).ravel()
     std = "".join(f"<tr><td>{html.escape(k)}</td><td style='text-align:right'>{v:.4g}</td></tr>"
@@ -114,12 +118,15 @@ def calibration_html(result, dropped: list[int], n_samples: int, verdict: str | 
         f"<b>Calibration</b> ({result.model}, {len(kept)} of {n_samples} samples; {note})<br>",
         f"<b>RMS</b> reprojection error: {result.rms:.3f} px<br>",
         "<b>K</b>" + matrix_html(K, 3),
-        "<b>distortion</b> [k1, k2, p1, p2, k3]: " + ", ".join(f"{x:.5f}" for x in d) + "<br>",
+        f"<b>distortion</b> {_COEFFS.get(result.model, '[k1, k2, p1, p2, k3]')}: "
+        + ", ".join(f"{x:.5f}" for x in d) + "<br>",
         "<b>standard deviations</b><table style='font-family:monospace'>" + std + "</table>",
         "<b>per-sample RMS (px)</b><br>" + error_chart_svg(result.per_view_rms),
     ]
     if verdict:
         parts.append("<br><b>verdict</b> " + verdict)
+    if against:
+        parts.append(f'<br><b>against the robot\'s file</b> <span class="dtscal-against">{html.escape(against)}</span>')
     parts.append("</div>")
     return "".join(parts)
 
@@ -209,7 +216,7 @@ def rectification_maps_fast(cam):
     """
     if cam.K[0, 1] != 0.0:
         return cam.rectification_maps()
-    return cv2.initUndistortRectifyMap(cam.K, cam.dist, None, cam.rectified_K, cam.size, cv2.CV_32FC1)
+    return cam.opencv_maps()
 
 
 def outline_thumb(corners: np.ndarray, size, width: int = 96) -> bytes:

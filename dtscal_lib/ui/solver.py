@@ -81,9 +81,10 @@ class SolverProcess:
             return value
         raise DtscalError(value)
 
-    def calibrate(self, object_points, image_points, image_size, model: str):
+    def calibrate(self, object_points, image_points, image_size, model: str, skew: bool = False):
         """``(CalibrationResult, dropped)`` computed in the child; DtscalError as the solver raised it."""
-        return self._ask(("calibrate", list(object_points), list(image_points), tuple(image_size), model))
+        return self._ask(("calibrate", list(object_points), list(image_points), tuple(image_size), model,
+                          bool(skew)))
 
     def assess(self, result):
         """:func:`assess_quality` of a result, computed in the child."""
@@ -122,8 +123,8 @@ def _serve() -> None:
             if request[0] == "assess":
                 answer = ("ok", assess_quality(request[1]))
             else:
-                _, obj, img, size, model = request
-                answer = ("ok", calibrate_without_outlier_views(obj, img, size, model=model))
+                _, obj, img, size, model, skew = request
+                answer = ("ok", calibrate_without_outlier_views(obj, img, size, model=model, skew=skew))
         except DtscalError as exc:
             answer = ("error", str(exc))
         except Exception as exc:  # numerical breakdown: a message for the UI, never a traceback

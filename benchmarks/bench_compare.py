@@ -1,0 +1,145 @@
+"""Benchmark: ``dtscal compare`` against mrcal's ``projection_diff`` on the same two models.
+
+The models: two half-set calibrations of one camera of OpenCV's real sample photographs
+(``data/real/opencv-samples``, 13 views each of left and right, 9x6 board, 30 mm), the kit's corners,
+the kit's solver; half A is every even view, half B every odd one (and more seeded random halves with
+``--splits``). Both models are LENSMODEL_OPENCV5 in mrcal's terms (``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``,
+no skew), k3 estimated so that the halves differ the most at the corners, as issue 25 measured.
+
+mrcal 2.2 (Debian's ``python3-mrcal``, ``scripts/install-mrcal.sh``) runs on ``/usr/bin/python3`` in a
+subprocess (``benchmarks/mrcal_diff_helper.py``, the same way as ``bench_mrcal.py``):
+``mrcal.projection_diff(models, gridn_width=60, use_uncertainties=False)``, i.e. the rotation fitted at
+infinity over the pixels within min(W, H)/6 of the centre, which is what the kit does for two files without
+uncertainty. Compared: the difference at the image centre and corners and its maximum and RMS over the
+grid where both models unproject. Acceptance (issue 25): within 10 %.
+
+Run::
+
+    .venv/bin/python benchmarks/bench_compare.py [--side left|right] [--splits N] [--json] [--check]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
+
+from bench_mrcal import BOARD, MRCAL_PYTHON, REAL, MrcalMissing, _clean_env, mrcal_problem  # noqa: E402
+
+from dtscal_lib import pipeline  # noqa: E402
+from dtscal_lib.boards import parse_board  # noqa: E402
+from dtscal_lib.calibration import calibrate  # noqa: E402
+from dtscal_lib.compare import PLACES, projection_difference  # noqa: E402
+
+HELPER = HERE / "mrcal_diff_helper.py"
+#: issue 25's acceptance: the kit's and mrcal's projection differences agree within 10 %
+AGREE_REL = 0.10
+
+
+def corners(side: str):
+    """The kit's corners of ``data/real/opencv-samples/<side>`` (object points, image points, size)."""
+    res = pipeline.calibrate_intrinsics(REAL / side, board=parse_board(*BOARD), out_dir=None).result
+    return res.object_points, res.image_points, res.image_size
+
+
+def halves(n_views: int, seed: int | None) -> tuple[list[int], list[int]]:
+    """Even and odd views (``seed`` None), or a seeded random split into two halves."""
+    if seed is None:
+        return list(range(0, n_views, 2)), list(range(1, n_views, 2))
+    perm = np.random.default_rng(seed).permutation(n_views)
+    return sorted(perm[: n_views // 2].tolist()), sorted(perm[n_views // 2:].tolist())
+
+
+def mrcal_model(res) -> dict:
+    K = res.K
+    return {"lensmodel": "LENSMODEL_OPENCV5", "imagersize": list(res.image_size),
+            "intrinsics": [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *map(float, res.dist)]}
+
+
+def run_mrcal_diff(models: list[dict], gridn_width: int = 60) -> dict:
+    problem = mrcal_problem()
+    if problem:
+        raise MrcalMissing(problem)
+    p = subprocess.run([MRCAL_PYTHON, str(HELPER)], input=json.dumps({"models": models, "gridn_width": gridn_width}),
+                       env=_clean_env(), capture_output=True, text=True, timeout=600, check=False)
+    try:
+        out = json.loads(p.stdout.strip().splitlines()[-1])
+    except (IndexError, json.JSONDecodeError):
+        raise RuntimeError(f"mrcal helper failed (exit {p.returncode}): {p.stderr.strip()[-2000:]}") from None
+    if "error" in out:
+        raise MrcalMissing(out["error"])
+    return out
+
+
+def summary(diff: np.ndarray) -> dict:
+    """Centre, corners, max and RMS of a (H, W) difference grid (NaN/negative: not unprojectable)."""
+    d = np.where(diff >= 0, diff, np.nan)
+    h, w = d.shape
+    at = {"centre": d[h // 2, w // 2], "top-left": d[0, 0], "top-right": d[0, -1],
+          "bottom-left": d[-1, 0], "bottom-right": d[-1, -1]}
+    return {**{k: float(v) for k, v in at.items()}, "max": float(np.nanmax(d)),
+            "rms": float(np.sqrt(np.nanmean(d ** 2)))}
+
+
+def compare_pair(obj, img, size, split) -> dict:
+    a_idx, b_idx = split
+    ra = calibrate([obj[i] for i in a_idx], [img[i] for i in a_idx], size, fix_k3=False)
+    rb = calibrate([obj[i] for i in b_idx], [img[i] for i in b_idx], size, fix_k3=False)
+    kit = projection_difference(ra.camera(), rb.camera())
+    m = run_mrcal_diff([mrcal_model(ra), mrcal_model(rb)])
+    md = np.asarray(m["difflen"], dtype=float)
+    kd = np.where(np.isfinite(kit.diff), kit.diff, -1.0)
+    both = (md >= 0) & (kd >= 0)  # compared where both unproject
+    ks, ms = summary(np.where(both, kd, -1)), summary(np.where(both, md, -1))
+    rel = {k: ks[k] / ms[k] - 1 for k in ks if np.isfinite(ks[k]) and np.isfinite(ms[k]) and ms[k] > 0}
+    return {"views": [a_idx, b_idx], "kit": ks, "mrcal": ms, "rel": rel,
+            "kit_rotation_deg": kit.rotation_deg, "grid_equal": bool(np.allclose(kit.pixels, np.asarray(m["q0"]))),
+            "unprojectable": {"kit": int((kd < 0).sum()), "mrcal": int((md < 0).sum())}}
+
+
+def disagreements(c: dict) -> list[str]:
+    bad = [f"{k}: kit {c['kit'][k]:.4g} px, mrcal {c['mrcal'][k]:.4g} px ({v:+.1%})"
+           for k, v in c["rel"].items() if abs(v) > AGREE_REL]
+    if not c["grid_equal"]:
+        bad.append("the grids differ")
+    return bad
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--side", choices=["left", "right", "both"], default="both")
+    ap.add_argument("--splits", type=int, default=0, help="seeded random splits besides even/odd")
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--check", action="store_true", help="exit 1 when the kit and mrcal disagree by more than 10 %%")
+    args = ap.parse_args(argv)
+    out, bad = [], []
+    for side in (["left", "right"] if args.side == "both" else [args.side]):
+        obj, img, size = corners(side)
+        for seed in [None, *range(args.splits)]:
+            c = compare_pair(obj, img, size, halves(len(obj), seed))
+            c["side"], c["seed"] = side, seed
+            out.append(c)
+            bad += [f"{side} split {seed}: {b}" for b in disagreements(c)]
+            if not args.json:
+                name = "even/odd" if seed is None else seed
+                print(f"{side} split {name}: kit rotation {c['kit_rotation_deg']:.3f} deg")
+                for k in (*PLACES, "max", "rms"):
+                    print(f"  {k:12s} kit {c['kit'][k]:9.3f} px  mrcal {c['mrcal'][k]:9.3f} px  "
+                          f"{c['rel'].get(k, float('nan')):+.2%}")
+    if args.json:
+        print(json.dumps(out))
+    if bad:
+        print("DISAGREE:\n  " + "\n  ".join(bad), file=sys.stderr)
+    return 1 if bad and args.check else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,117 @@
+"""``dtscal course``, ``handin``, ``release`` and ``handout``: the teaching layer's commands.
+
+Registered on the ``dtscal`` parser by :mod:`dtscal_lib.cli`, as :mod:`dtscal_lib.grading.command` registers
+``grade``; the calibration commands stay in ``cli.py``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from ..errors import DtscalError
+
+
+def add_parsers(sub) -> None:
+    """Register ``handout``, ``release``, ``course`` and ``handin`` on the ``dtscal`` sub-command parser."""
+    for name in ("handout", "release"):
+        sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ "
+                                       "with solutions/")
+        release_args(sp)
+        if name == "release":
+            sp.add_argument("--nbgrader", metavar="COURSE", help="write the course as an nbgrader course folder: "
+                            "COURSE/source/<notebook>/<notebook>.ipynb (solution, read-only and autograded test "
+                            "cells; the hidden cases in the tests' hidden part) and COURSE/nbgrader_config.py")
+
+    sp = sub.add_parser("course",
+                        help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
+    sp.add_argument("--port", type=int, default=8888)
+    sp.add_argument("--ip", default=None)
+    sp.add_argument("--no-browser", action="store_true")
+    sp.add_argument("--instructor", action="store_true", help="open solutions/ (the instructor's kit) instead")
+    sp.add_argument("--update", action="store_true",
+                    help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
+    sp.set_defaults(func=cmd_course)
+
+    sp = sub.add_parser("handin", help="zip your workspace notebooks into handin/NAME.zip to hand in")
+    sp.add_argument("--name", help="your name, for the file name (default: git's user.name, else your login)")
+    sp.add_argument("--out", metavar="FILE.zip", help="where to write the zip (default handin/NAME.zip)")
+    sp.set_defaults(func=cmd_handin)
+
+
+def cmd_release(args) -> int:
+    from ..paths import repo_root
+    from . import release
+
+    root = Path(args.repo) if args.repo else repo_root()
+    if getattr(args, "nbgrader", None):
+        from .nbgrader_export import export
+
+        for p in export(args.nbgrader, repo_root=root):
+            print(p)
+        print(f"nbgrader course in {args.nbgrader}: cd there, then `nbgrader generate_assignment 01_pinhole_projection`"
+              " (one assignment per notebook); autograding needs the kit installed where nbgrader runs",
+              file=sys.stderr)
+        return 0
+    if args.check:
+        diffs = release.check_notebooks(root / "solutions", root / "notebooks")
+        if diffs:
+            print("notebooks/ is out of date with solutions/; run `dtscal release --write` to regenerate:",
+                  file=sys.stderr)
+            for d in diffs:
+                print("  " + d, file=sys.stderr)
+            return 1
+        print("notebooks/ matches solutions/")
+        return 0
+    if args.execute:
+        for p in release.execute_solutions(root / "solutions", progress=True):
+            print(f"executed {p}")
+    if args.write or args.execute:
+        for p in release.generate_notebooks(root / "solutions", root / "notebooks"):
+            print(p)
+        return 0
+    if not args.out:
+        raise DtscalError("give OUT (folder for the student release), or --check, or --write")
+    print(release.release(Path(args.out), repo_root=root))
+    return 0
+
+
+def cmd_course(args) -> int:
+    from ..datasets import session_dir
+    from ..paths import repo_root
+    from . import workspace
+
+    root = repo_root()
+    if args.update:
+        report = workspace.update_workspace(root)
+        print(report.text())
+        return 0 if report.ok else 1
+    session_dir()  # fails early, with the fix, if the recording is missing
+    cmd = workspace.jupyter_command(root, instructor=args.instructor, port=args.port, ip=args.ip,
+                                    no_browser=args.no_browser)
+    print("starting JupyterLab:", " ".join(cmd), file=sys.stderr)
+    os.execv(sys.executable, cmd)
+    return 0  # pragma: no cover
+
+
+def cmd_handin(args) -> int:
+    from ..paths import repo_root
+    from . import handin
+
+    path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
+    print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
+    print("hand in this file (upload it to Gradescope, or as your instructor says); if your course collects "
+          "git repositories, commit and push instead: git add workspace && git commit -m 'hand in' && git push")
+    return 0
+
+
+def release_args(sp) -> None:
+    sp.add_argument("out", nargs="?", help="folder to write the student release into")
+    sp.add_argument("--check", action="store_true", help="exit 1 if notebooks/ differs from what would be generated")
+    sp.add_argument("--write", action="store_true", help="regenerate notebooks/ from solutions/ (seconds; enough "
+                    "after a change to text or code that leaves the stored outputs as they are)")
+    sp.add_argument("--execute", action="store_true",
+                    help="re-run every solution notebook (storing its outputs), then regenerate notebooks/")
+    sp.add_argument("--repo", help="kit checkout (default: the one this package runs from)")
+    sp.set_defaults(func=cmd_release)

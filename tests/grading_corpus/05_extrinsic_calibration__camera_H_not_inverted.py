@@ -1,0 +1,17 @@
+# Corpus of plausible student mistakes for tests/test_grading.py (also test_selfcheck_diagnosis.py).
+# mistake: H_not_inverted
+# expect: H used where its inverse belongs
+
+import numpy as np
+
+
+def camera_height_pitch(H, K):
+    M = np.linalg.inv(K) @ H  # H already maps pixels to the ground...
+    lam = 1.0 / np.linalg.norm(M[:, 0])
+    if lam * (0.3 * M[2, 0] + M[2, 2]) < 0:
+        lam = -lam
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
+    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    R = U @ Wt
+    C = -R.T @ t
+    return np.array([C[2], np.degrees(np.arcsin(-R[2, 2]))])

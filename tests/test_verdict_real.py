@@ -1,0 +1,219 @@
+"""The verdict on real photographs and on planted defects (issue 21): who is blamed for a residual.
+
+Material: OpenCV's real sample photographs (data/real/opencv-samples, 13 views per camera, 9x6
+corners, 30 mm), whose residuals are 1.7-2.0x the model-free corner noise; synthetic views of the
+Duckietown board through a known camera. Expectations are computed here, independently of the code
+under test: the board warp from mrcal's own formula (``mrcal.ref_calibration_object``:
+``z = warp * 4 xr (1 - xr)``), the residual sigma from the residuals and the parameter count, the
+severities from the rows of dtscal_lib.limits.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dtscal_lib import camera, duckietown as dt, limits, pipeline, quality
+from dtscal_lib.boards import DUCKIETOWN_BOARD, parse_board
+from dtscal_lib.calibration import calibrate
+from dtscal_lib.richer import fit_richer
+from dtscal_lib.session import assess_quality, calibrate_without_outlier_views
+
+REAL = Path(__file__).resolve().parents[1] / "data" / "real" / "opencv-samples"
+BOARD = parse_board("9x6", 0.03)
+OBJ = DUCKIETOWN_BOARD.object_points()
+LENS_WORDS = ("richer lens model", "--model plumb_bob", "estimate k3")
+
+
+@pytest.fixture(scope="module", params=["left", "right"])
+def real(request):
+    return request.param, pipeline.calibrate_intrinsics(REAL / request.param, board=BOARD).result
+
+
+def _views(n, rng, dist, noise=0.05):
+    img = []
+    while len(img) < n:
+        r = [*rng.uniform(-0.5, 0.5, 2), rng.uniform(-0.3, 0.3)]
+        t = [rng.uniform(-0.25, 0.05), rng.uniform(-0.17, 0.0), rng.uniform(0.22, 0.35)]
+        p = camera.project_points(OBJ, r, t, dt.default_K(), dist)
+        if p.min() > 5 and p[:, 0].max() < 635 and p[:, 1].max() < 475:
+            img.append(p + rng.normal(0.0, noise, p.shape))
+    return [OBJ] * n, img
+
+
+def _sigma_per_coordinate(res) -> float:
+    e = np.concatenate(quality.residuals(res))
+    p = len(res.std) + 6 * res.n_views
+    return float(np.sqrt((e ** 2).sum() / (e.size - p)))
+
+
+def test_clean_real_photographs_are_not_bad_and_get_no_lens_advice(real):
+    side, res = real
+    q = res.quality()
+    assert q.verdict != "bad", (side, q.warnings())
+    codes = [f.code for f in q.findings]
+    assert "fit" not in codes and "unexplained_fit" not in codes, (side, q.warnings())
+    for f in q.findings:
+        assert not any(w in f.advice for w in LENS_WORDS), (side, str(f))
+    # the residual above the noise is said to be the print and the detector, with the warp in mm
+    ratio = _sigma_per_coordinate(res) / q.noise_sigma
+    assert 1.5 < ratio < limits.LIMITS["unexplained_ratio_doubtful"].value, (side, ratio)
+    note = next(n for n in q.notes if n.code == "unexplained_fit")
+    assert "mm" in note.message and "the print and the detector" in note.message and "cm" in note.message
+    assert f"{ratio:.1f} times" in note.message
+    assert "not the lens" not in q.meaning() or "richer lens model" not in q.meaning()
+
+
+def test_board_warp_is_recovered_as_mrcal_defines_it():
+    """Views of a board bent by 1.5 mm along x and -0.8 mm along y (mrcal's parabola, written out here)."""
+    rng = np.random.default_rng(3)
+    W, H = 7, 5
+    obj = np.array([[i * 0.031, j * 0.031] for j in range(H) for i in range(W)])
+    xr, yr = obj[:, 0] / obj[:, 0].max(), obj[:, 1] / obj[:, 1].max()
+    z = 0.0015 * 4 * xr * (1 - xr) - 0.0008 * 4 * yr * (1 - yr)
+    P = np.column_stack([obj, z])
+    img = []
+    while len(img) < 12:
+        r = np.array([*rng.uniform(-0.5, 0.5, 2), rng.uniform(-0.3, 0.3)])
+        t = np.array([rng.uniform(-0.15, 0.0), rng.uniform(-0.1, 0.0), rng.uniform(0.25, 0.35)])
+        p = cv2.projectPoints(P, r, t, dt.default_K(), dt.default_dist())[0].reshape(-1, 2)
+        if p.min() > 5 and p[:, 0].max() < 635 and p[:, 1].max() < 475:
+            img.append(p + rng.normal(0, 0.02, p.shape))
+    res = calibrate([obj] * 12, img, dt.IMAGE_SIZE)
+    w = fit_richer(res, "warp").warp * 1000
+    assert w == pytest.approx([1.5, -0.8], abs=0.1), w
+    q = res.quality()
+    f = next(f for f in q.findings if f.code == "board_warp")
+    assert "+1.5" in f.message and "flat" in f.advice, str(f)
+
+
+def test_a_single_displaced_corner_is_named_left_out_and_recalibrated(real):
+    side, res = real
+    img = [np.asarray(p, float).reshape(-1, 2).copy() for p in res.image_points]
+    img[3][20] += [2.0 / np.sqrt(2), 2.0 / np.sqrt(2)]  # 2 px
+    planted = res.refit(res.object_points, img)
+    q = planted.quality()
+    assert q.verdict in ("doubtful", "bad")
+    f = next(f for f in q.findings if f.code == "outlier_corners")
+    assert f.views == [3] and "view 3 corner 20 (column 2, row 2)" in f.message, str(f)
+    again = q.without_outlier_corners
+    assert again.n_points == planted.n_points - 1
+    # without it, the calibration is the clean one again (the planted corner was its only change)
+    assert again.rms == pytest.approx(res.rms * np.sqrt(res.n_points / again.n_points), rel=0.02)
+    assert abs(again.K[0, 0] - res.K[0, 0]) < 0.1 * res.std["fx"]
+    # and the clean set names no corner
+    assert not any(f.code == "outlier_corners" for f in res.quality().findings)
+    # what the command line and the live CALIBRATE run: the corner is left out of the calibration they keep
+    kept, dropped = calibrate_without_outlier_views(res.object_points, img, res.image_size, model=res.model)
+    assert dropped == [] and kept.n_points == planted.n_points - 1
+    assert [(c["view"], c["corner"], c["column"], c["row"]) for c in kept.left_out_corners] == [(3, 20, 2, 2)]
+    np.testing.assert_allclose(kept.K, again.K, rtol=1e-6)
+    f = next(f for f in kept.quality().findings if f.code == "outlier_corners")
+    assert "left out" in f.message and "view 3 corner 20 (column 2, row 2)" in f.message, str(f)
+
+
+def test_planted_defects_on_real_photographs_are_named(real):
+    side, res = real
+    obj = [np.asarray(o, float) for o in res.object_points]
+    img = [np.asarray(p, float).reshape(-1, 2).copy() for p in res.image_points]
+    # a shifted view: one view's corners all moved by random noise of 1 px
+    rng = np.random.default_rng(1)
+    bad = [p.copy() for p in img]
+    bad[5] = bad[5] + rng.normal(0, 1.0, bad[5].shape)
+    q = res.refit(obj, bad).quality()
+    assert q.verdict in ("doubtful", "bad") and 5 in q.views_to_drop(), q.warnings()
+    # too few views
+    q = res.refit(obj[:4], img[:4]).quality()
+    assert q.verdict in ("doubtful", "bad") and "few_views" in [f.code for f in q.findings]
+
+
+def test_the_lens_is_blamed_with_its_own_limits():
+    """A lens with k3 fitted without k3: the finding ``fit`` names k3; "bad" above fit_ratio_bad, the fit's own row."""
+    rng = np.random.default_rng(2)
+    obj, img = _views(16, rng, [-0.25, 0.04, 0.0, 0.0, 0.25])
+    res = calibrate(obj, img, dt.IMAGE_SIZE)
+    q = res.quality()
+    ratio = _sigma_per_coordinate(res) / q.noise_sigma
+    f = next(f for f in q.findings if f.code == "fit")
+    assert limits.LIMITS["fit_ratio_bad"].value < ratio < limits.LIMITS["corner_sigma_bad"].value, ratio
+    assert f.severity == "bad" and "k3" in f.advice, (ratio, str(f))
+    assert f"{ratio:.1f} times" in f.message
+
+
+def test_the_fit_rule_compares_sigma_per_coordinate_not_rms_per_point():
+    """k3 = 0.05 left out: sigma per coordinate 1.2x the noise (below fit_ratio_doubtful), RMS per point 1.7x."""
+    rng = np.random.default_rng(2)
+    obj, img = _views(16, rng, [-0.25, 0.04, 0.0, 0.0, 0.05])
+    res = calibrate(obj, img, dt.IMAGE_SIZE)
+    q = res.quality()
+    sigma = _sigma_per_coordinate(res)
+    assert sigma / q.noise_sigma < limits.LIMITS["fit_ratio_doubtful"].value < res.rms / q.noise_sigma
+    assert not any(f.code == "fit" for f in q.findings), q.warnings()
+    assert q.richer is None  # nothing fitted below the limit
+
+
+@pytest.mark.parametrize("corner,expected", [(0.5, "good"), (1.5, "doubtful"), (3.0, "doubtful"),
+                                             (5.0, "bad")])
+def test_image_corner_uncertainty_severity_follows_its_rows(corner, expected):
+    lo, hi = limits.LIMITS["corner_sigma_doubtful"].value, limits.LIMITS["corner_sigma_bad"].value
+    assert (lo, hi) == (1.0, 4.0)  # the cases above straddle these rows
+    assert quality.corner_severity(corner) == expected
+
+
+def test_image_corners_never_seen_make_the_verdict_bad():
+    """Eight views all in the middle of the image: the image corners are extrapolated far (over 4 px)."""
+    rng = np.random.default_rng(1)
+    poses = [([a, b, 0.1 * k], [-0.1 + 0.03 * a, -0.06, 0.3 + 0.02 * k])
+             for k, (a, b) in enumerate([(0.4, 0.1), (-0.4, 0.2), (0.1, -0.4), (-0.2, -0.3), (0.3, 0.35),
+                                         (-0.35, -0.1), (0.2, -0.2), (-0.1, 0.4)])]
+    img = [camera.project_points(OBJ, r, t, dt.default_K(), dt.default_dist()) + rng.normal(0, 0.05, (35, 2))
+           for r, t in poses]
+    q = calibrate([OBJ] * 8, img, dt.IMAGE_SIZE).quality()
+    f = next(f for f in q.findings if f.code == "uncertainty")
+    assert q.uncertainty.corner_mean > limits.LIMITS["corner_sigma_bad"].value
+    assert f.severity == "bad" and q.verdict == "bad"
+
+
+def test_live_tool_and_command_line_give_the_same_verdict_for_the_same_samples(real):
+    """The live CALIBRATE solves and judges in its helper process (dtscal_lib.ui.solver); the command line in
+    the session itself. The same samples give the same calibration, verdict and image-corner figure."""
+    from dtscal_lib.ui.solver import SolverProcess
+
+    side, res = real
+    obj, img = list(res.object_points), list(res.image_points)
+    skew = side == "right"  # the live solver is told the skew choice too
+    cli_result, cli_dropped = calibrate_without_outlier_views(obj, img, res.image_size, model=res.model, skew=skew)
+    cli = assess_quality(cli_result)
+    solver = SolverProcess()
+    try:
+        assert solver.ready(wait=60)
+        live_result, live_dropped = solver.calibrate(obj, img, res.image_size, res.model, skew=skew)
+        live = solver.assess(live_result)
+    finally:
+        solver.close()
+    assert list(live_dropped) == list(cli_dropped)
+    np.testing.assert_allclose(live_result.K, cli_result.K, rtol=1e-9)
+    assert live_result.skew == cli_result.skew == skew
+    assert live.verdict == cli.verdict and [f.code for f in live.findings] == [f.code for f in cli.findings]
+    assert live.uncertainty.corner_mean == pytest.approx(cli.uncertainty.corner_mean, rel=1e-9)
+
+
+@pytest.mark.parametrize("n_views", [4, 5])
+def test_sigma_covers_as_often_as_it_says_at_few_views(real, n_views):
+    """30 random subsets of n views: +-1 sigma of fx, fy, cx, cy covers the 13-view value 55-85 % of the time
+    (issue 21's acceptance; an honest sigma covers 68 %). The subsets are drawn here, calibrated with the
+    kit's calibrate, and judged against the full set's values."""
+    side, res = real
+    ref = np.array([res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]])
+    rng = np.random.default_rng(0)
+    hits = []
+    for _ in range(30):
+        pick = sorted(rng.choice(res.n_views, n_views, replace=False))
+        r = calibrate([res.object_points[i] for i in pick], [res.image_points[i] for i in pick], res.image_size)
+        v = np.array([r.K[0, 0], r.K[1, 1], r.K[0, 2], r.K[1, 2]])
+        hits.append(np.abs(v - ref) <= np.array([r.std[k] for k in ("fx", "fy", "cx", "cy")]))
+    covered = float(np.mean(hits))
+    assert 0.55 <= covered <= 0.85, (side, n_views, covered)
