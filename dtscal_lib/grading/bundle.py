@@ -9,8 +9,10 @@ notebooks, ``.py`` files, and the zip ``dtscal handin`` wrote, read as it is wit
 
 The zip holds the kit's library, the hidden cases (``grading/``) and the solution notebooks
 (references). ``setup.sh`` installs the library into a virtual environment and makes
-``grading/`` and ``solutions/`` readable by root only; the sandbox runs student code as
-a fresh uid behind Landlock and namespaces (docs/grading-sandbox.md). ``run_autograder``
+``grading/`` and ``solutions/`` readable by root only, and installs bubblewrap: student code runs
+in a bubblewrap sandbox that holds neither, or, where Gradescope's container allows no user
+namespace, as a bare process whose barriers ``results.json`` lists (docs/grading-sandbox.md:
+Gradescope's own per-submission container keeps other students out either way). ``run_autograder``
 always writes a results file, even if grading fails.
 For a local test, ``DTSCAL_AUTOGRADER_ROOT`` replaces ``/autograder`` and ``DTSCAL_PYTHON``
 the virtual environment's Python.
