@@ -8,6 +8,10 @@
    the test corpus (35 %) or the untouched student notebook (10 %). Target: < 60 s wall, sandbox included.
 3. Baseline, measured in the same run: ``--jobs 1`` against ``--jobs 2`` on the first
    10 students (50 submissions); the ratio says what the second process buys.
+4. The sandbox's cost: the same class graded in this process with ``--jobs 2``, once in
+   bubblewrap and once with the harness run as a bare process (the benchmark switches
+   ``sandbox.MODE``; the grader has no such option). Target: bubblewrap <= 1.5x bare; prints
+   the cost per submission and per check.
 
 Run::
 
@@ -61,6 +65,63 @@ def grade(target: Path, jobs: int, out: Path) -> float:
     return took
 
 
+def sandbox_cost(cls: Path) -> dict:
+    """Grade ``cls`` in this process with --jobs 2, in bubblewrap and bare; (seconds, counts)."""
+    sys.path.insert(0, str(ROOT))
+    from dtscal_lib.grading import grade as grade_module
+    from dtscal_lib.grading import sandbox
+    from dtscal_lib.grading.classroom import grade_all, roster
+    from dtscal_lib.grading.material import Material
+
+    material = Material.load(ROOT)
+    items = roster(cls).items
+    counts = {"sandboxes": 0, "checks": 0}
+    real = grade_module.run_calls
+
+    def counted(statements, checks, **kw):
+        counts["sandboxes"] += 1
+        counts["checks"] += len(checks)
+        return real(statements, checks, **kw)
+
+    grade_module.run_calls = counted
+    out = {}
+    try:
+        for mode in ("bare", "bubblewrap", "bare", "bubblewrap"):  # twice each, interleaved: load drifts
+            sandbox.MODE = mode
+            counts.update(sandboxes=0, checks=0)
+            t0 = time.perf_counter()
+            results = grade_all(items, material, jobs=2)
+            took = time.perf_counter() - t0
+            out[mode] = min(out.get(mode, took), took)
+            out[f"{mode}_score"] = round(sum(r.score for r in results), 2)
+    finally:
+        grade_module.run_calls = real
+        sandbox.MODE = None
+    out.update(counts)
+    return out
+
+
+def startup_cost(rounds: int = 15) -> dict:
+    """Median seconds of one sandbox with one trivial check, in bubblewrap and bare (interleaved)."""
+    import statistics
+
+    sys.path.insert(0, str(ROOT))
+    from dtscal_lib.grading import sandbox
+
+    statements = [("import numpy as np", 1), ("def f(x):\n    return np.asarray(x) * 2", 2)]
+    times = {"bubblewrap": [], "bare": []}
+    try:
+        for _ in range(rounds):
+            for mode in times:
+                sandbox.MODE = mode
+                t0 = time.perf_counter()
+                sandbox.run_calls(statements, [sandbox.CheckJob(id=0, calls=[("f", (3.0,))], wall=10, cpu=5)])
+                times[mode].append(time.perf_counter() - t0)
+    finally:
+        sandbox.MODE = None
+    return {m: statistics.median(v) for m, v in times.items()}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--students", type=int, default=60)
@@ -80,12 +141,21 @@ def main() -> int:
         n_sub = sum(1 for _ in sub.rglob("0*"))
         serial = grade(sub, 1, tmp)
         parallel = grade(sub, 2, tmp)
+        cost = sandbox_cost(cls)
+        start = startup_cost()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     res = {"one_notebook_s": round(one, 2), "class_submissions": n, "class_jobs2_s": round(full, 1),
            "class_per_submission_s": round(full / n, 3), "subset_submissions": n_sub,
            "subset_jobs1_s": round(serial, 1), "subset_jobs2_s": round(parallel, 1),
-           "speedup_jobs2_vs_jobs1": round(serial / parallel, 2)}
+           "speedup_jobs2_vs_jobs1": round(serial / parallel, 2),
+           "class_jobs2_bubblewrap_s": round(cost["bubblewrap"], 1), "class_jobs2_bare_s": round(cost["bare"], 1),
+           "bubblewrap_vs_bare": round(cost["bubblewrap"] / cost["bare"], 2),
+           "sandbox_cost_per_submission_ms": round(1000 * (cost["bubblewrap"] - cost["bare"]) / cost["sandboxes"], 1),
+           "sandbox_cost_per_check_ms": round(1000 * (cost["bubblewrap"] - cost["bare"]) / cost["checks"], 2),
+           "same_scores": cost["bubblewrap_score"] == cost["bare_score"],
+           "one_check_bubblewrap_ms": round(1000 * start["bubblewrap"], 1),
+           "one_check_bare_ms": round(1000 * start["bare"], 1)}
     if args.json:
         print(json.dumps(res))
     else:
@@ -94,7 +164,16 @@ def main() -> int:
               f"({full / n:.2f} s per submission; target < 60 s, sandbox included)")
         print(f"subset of {n_sub} submissions: --jobs 1 {serial:.1f} s, --jobs 2 {parallel:.1f} s: "
               f"{serial / parallel:.2f}x faster with 2 processes")
-    ok = one < 10 and full < 60
+        print(f"the same class in this process, --jobs 2: bubblewrap {cost['bubblewrap']:.1f} s, checks as bare "
+              f"processes {cost['bare']:.1f} s: {res['bubblewrap_vs_bare']:.2f}x (target <= 1.5x); the sandbox "
+              f"costs {res['sandbox_cost_per_submission_ms']:.0f} ms per submission ({cost['sandboxes']} sandboxes), "
+              f"{res['sandbox_cost_per_check_ms']:.1f} ms per check ({cost['checks']} checks); "
+              f"same scores: {res['same_scores']}")
+        print(f"one submission with one trivial check (median of 15): bubblewrap "
+              f"{res['one_check_bubblewrap_ms']:.0f} ms, bare {res['one_check_bare_ms']:.0f} ms: "
+              f"bubblewrap's start costs "
+              f"{res['one_check_bubblewrap_ms'] - res['one_check_bare_ms']:.0f} ms per submission")
+    ok = one < 10 and full < 60 and res["bubblewrap_vs_bare"] <= 1.5 and res["same_scores"]
     return 0 if ok else 1
 
 

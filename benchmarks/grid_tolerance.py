@@ -28,6 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dtscal_lib import detect as D  # noqa: E402
+from dtscal_lib.detect.grid import _local_square  # noqa: E402
 from dtscal_lib.boards import parse_board  # noqa: E402
 
 REAL = Path(__file__).resolve().parents[1] / "data" / "real" / "opencv-samples"
@@ -83,7 +84,7 @@ def row(name, cases):
             continue
         j = D.grid_jump(det.corners, B)
         jumps.append(j[inner.ravel()].max())
-        fracs.append((j / D._local_square(det.corners, B))[inner.ravel()].max())
+        fracs.append((j / _local_square(det.corners, B))[inner.ravel()].max())
         outer.append((j / D.grid_tolerance(det.corners, B))[~inner.ravel()].max())
         worst = max(worst, float(np.linalg.norm(det.corners - truth, axis=1).max()))
     print(f"{name:20s} views {len(cases):3d}  inner jump max {max(jumps):.2f} px ({max(fracs):.3f} square), "

@@ -78,7 +78,9 @@ class Board:
         return f"{self.cols}x{self.rows} inner corners, {self.square * 1000:g} mm squares"
 
 
-#: the Duckietown calibration board: 8x6 squares, 7x5 inner corners, 31 mm squares
+#: the Duckietown calibration board: 8x6 squares, 7x5 inner corners, 31 mm squares (``dts duckiebot
+#: calibrate_intrinsics`` runs ROS's calibrator with ``--size 7x5 --square 0.031``; lib-dt-computer-vision's
+#: boards.py ``CalibrationBoard8by6``)
 DUCKIETOWN_BOARD = Board(7, 5, 0.031)
 
 
@@ -95,9 +97,13 @@ def parse_board(spec: str, square: float | None = None) -> Board:
 
 
 # --- Ground placement for extrinsic calibration -------------------------------------------
-#: x (forward, metres) of the board's nearest row of inner corners
+# Source: Duckietown's lib-dt-computer-vision, src/dt_computer_vision/camera/calibration/extrinsics/boards.py,
+# CalibrationBoard8by6 (7x5 inner corners, square 0.031, x_offset 0.16, y_offset -0.124: the board's outer
+# corner, as the printed A3 pattern states it, duckietown.md); the inner corners start one square inside it.
+# The DD24's placement is in dtscal_lib.profiles.
+#: x (forward, metres) of the board's nearest row of inner corners (0.160 + 0.031)
 GROUND_NEAR_ROW_X = 0.191
-#: |y| (metres) of the outermost inner-corner columns (corners span -0.093 .. +0.093)
+#: |y| (metres) of the outermost inner-corner columns (corners span -0.093 .. +0.093; -0.124 + 0.031)
 GROUND_HALF_WIDTH_Y = 0.093
 
 

@@ -72,7 +72,10 @@ _UNSUPPORTED_MODELS: dict[str, str] = {}
 INTRINSIC_KEYS = ("image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
                   "distortion_coefficients", "rectification_matrix", "projection_matrix")
 
-_ROBOT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+#: the one robot-name rule (files, topics, COMMIT, ``ros:NAME``): a Duckiebot's name is a component of its ROS
+#: topics ``/NAME/camera_node/...``, and ROS names hold letters, digits and underscores only (ROS wiki, "Names":
+#: "subsequent characters can be alphanumeric ([0-9|a-z|A-Z]), underscores (_)")
+ROBOT_NAME = re.compile(r"[A-Za-z0-9_]+")
 #: longest robot name: a hostname label (Duckiebots are named by their hostname); the
 #: kit's longest file name for it, the backup's temporary ``.NAME.rejected.yaml.bak.XXXXXXXX.tmp``,
 #: then stays far below every filesystem's 255-byte limit
@@ -86,6 +89,11 @@ _MAX_ASPECT = 5.0        # max(fx/fy, fy/fx)
 
 
 # --------------------------------------------------------------------------- paths
+def is_robot_name(name) -> bool:
+    """True for a Duckiebot's name by the one rule (:data:`ROBOT_NAME`)."""
+    return isinstance(name, str) and ROBOT_NAME.fullmatch(name) is not None
+
+
 def check_robot_name(robot: str) -> str:
     """Validate a robot name for writing its calibration; returns it (``default`` is refused)."""
     if not isinstance(robot, str) or not robot:
@@ -94,11 +102,6 @@ def check_robot_name(robot: str) -> str:
         raise CalibrationFileError(
             f"--robot {robot}: default.yaml is the factory calibration and is never overwritten; pass --robot NAME "
             "(robot names are compared ignoring case)"
-        )
-    if not _ROBOT_NAME.fullmatch(robot) or ".." in robot:
-        raise CalibrationFileError(
-            f"robot name {robot[:80]!r} is not valid: use letters, digits, '_', '-' and '.', without path "
-            "separators or '..' (the name of the Duckiebot, e.g. --robot autobot01)"
         )
     if len(robot) > MAX_ROBOT_NAME:
         raise CalibrationFileError(
@@ -110,6 +113,11 @@ def check_robot_name(robot: str) -> str:
         raise CalibrationFileError(
             f"--robot {robot}: names ending in {REJECTED_SUFFIX!r} are kept for refused calibrations "
             f"(NAME{REJECTED_SUFFIX}.yaml); pass the robot's own name"
+        )
+    if not is_robot_name(robot):
+        raise CalibrationFileError(
+            f"robot name {robot[:80]!r} is not valid: a Duckiebot's name has letters, digits and '_' only (it names "
+            "its ROS topics /NAME/camera_node/...), e.g. --robot autobot01"
         )
     return robot
 
@@ -500,10 +508,26 @@ def load_intrinsics(path) -> IntrinsicCalibration:
         ``K``, unknown distortion model, non-rotation ``R``, malformed ``P``.
     """
     doc, where = _read_yaml(path)
-    return IntrinsicCalibration.from_dict(doc, where)
+    calib = IntrinsicCalibration.from_dict(doc, where)
+    _warn_outside_profile(calib, where)
+    return calib
 
 
-def validate_homography(H, where: str = "homography", *, writing: bool = False) -> np.ndarray:
+def _warn_outside_profile(calib: "IntrinsicCalibration", where: str) -> None:
+    """One line when the file's focal lengths lie far outside those of the robots of its kind (portrait
+    frames: the DD24's, else the Duckiebot's fleet; :mod:`dtscal_lib.profiles`): loaded, but named."""
+    from .profiles import profile_for_image
+
+    prof = profile_for_image(calib.width, calib.height)
+    lo, hi = prof.fx_per_width
+    fx, fy = float(calib.K[0, 0]), float(calib.K[1, 1])
+    if not all(lo <= f / calib.width <= hi for f in (fx, fy)):
+        _warn(where, f"fx {fx:.0f} / fy {fy:.0f} px at {calib.width} px wide lie far outside a {prof.name}'s cameras "
+                     f"({lo * calib.width:.0f}-{hi * calib.width:.0f} px): another camera, or a calibration to redo")
+
+
+def validate_homography(H, where: str = "homography", *, writing: bool = False,
+                        corrupt_rule: bool = True) -> np.ndarray:
     """Check a ground homography (rectified pixel -> ground metres); returns (3, 3) float64.
 
     Refuses non-finite and singular homographies with a :class:`CalibrationFileError` naming
@@ -525,7 +549,9 @@ def validate_homography(H, where: str = "homography", *, writing: bool = False) 
     if sv[0] == 0 or sv[-1] / sv[0] < 1e-14:
         raise _fail(where, "homography is singular (it maps the image onto a line or a point); "
                            "recalibrate the extrinsics")
-    if dt.homography_is_corrupt(H) and not writing:
+    if not corrupt_rule:  # a robot whose camera sees its ground this way (the DD24: dtscal_lib.profiles)
+        pass
+    elif dt.homography_is_corrupt(H) and not writing:
         _warn(where, f"homography has H[1][2] = {H[1, 2]:g} > 0: the camera's image is rotated 180 degrees "
                      "(mounted upside-down), or the corners were mirrored or mis-ordered. Duckietown reads such "
                      "files but its calibration refuses to write them; check the robot's ground projection")
@@ -694,7 +720,7 @@ def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str, *, rejecte
     return _write(_target(intrinsic_path(out_dir, robot), rejected), calib.to_dict())
 
 
-def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
+def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False, corrupt_rule: bool = True) -> Path:
     """Write ``out_dir/camera_extrinsic/<robot>.yaml`` (``homography: [9 floats]``) atomically.
 
     ``H`` (3, 3) maps rectified pixels to ground metres; it is validated (finite,
@@ -703,7 +729,7 @@ def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False) -> Path:
     """
     check_robot_name(robot)
     path = _target(extrinsic_path(out_dir, robot), rejected)
-    H = validate_homography(H, f"{path} (not written)", writing=True)
+    H = validate_homography(H, f"{path} (not written)", writing=True, corrupt_rule=corrupt_rule)
     return _write(path, {"homography": [_plain(v) for v in H.ravel()]})
 
 
@@ -747,7 +773,7 @@ def _v2_frame(calib: IntrinsicCalibration) -> tuple[np.ndarray, np.ndarray]:
     return Kp, np.array([[sx, 0, -tl[0] * sx], [0, sy, -tl[1] * sy], [0, 0, 1.0]])
 
 
-def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
+def extrinsic_to_v2(H, calib: IntrinsicCalibration, corrupt_rule: bool = True) -> np.ndarray:
     """Classic homography (rectified pixel -> ground m) -> the 3x3 matrix of a version-2 file.
 
     Mirrors lib-dt-computer-vision: its tool fits ``H_v`` from normalized image vectors
@@ -756,28 +782,65 @@ def extrinsic_to_v2(H, calib: IntrinsicCalibration) -> np.ndarray:
     (``camera_specific``: ``Hv2i @ F``). ``Kp`` is the rectified camera (``P[:, :3]``).
     """
     Kp, Hv2i = _v2_frame(calib)
-    Hv = validate_homography(H, "classic homography", writing=True) @ Kp
+    Hv = validate_homography(H, "classic homography", writing=True, corrupt_rule=corrupt_rule) @ Kp
     return np.linalg.inv(Hv2i) @ (Hv / Hv[2, 2])
 
 
-def extrinsic_from_v2(F, calib: IntrinsicCalibration, where: str = "version-2 homography") -> np.ndarray:
-    """The 3x3 matrix of a version-2 file -> classic homography (rectified pixel -> ground m), ``H[2,2] = 1``."""
+#: how a version-2 matrix is read: ``"independent"`` (Duckietown's current format, ``camera_specific``) or
+#: ``"vector"`` (the matrix maps the camera's normalized image vectors to the ground, as Duckietown's DD24
+#: reference ``assets/extrinsics/dd24/real-world/scenario0/homography.yaml`` stores it: see :func:`v2_reading`)
+V2_READINGS = ("independent", "vector")
+
+
+def extrinsic_from_v2(F, calib: IntrinsicCalibration, where: str = "version-2 homography",
+                      reading: str = "independent") -> np.ndarray:
+    """The 3x3 matrix of a version-2 file -> classic homography (rectified pixel -> ground m), ``H[2,2] = 1``.
+
+    ``reading="vector"``: ``F`` maps normalized image vectors ``pixel2vector(p) = K^-1 p`` of ``calib``'s
+    camera (lib-dt-computer-vision's ``CameraModel.pixel2vector`` uses ``K``) to the ground, so ``H = F K^-1``.
+    """
     F = np.asarray(F, dtype=np.float64)
     if F.size != 9 or not np.all(np.isfinite(F)):
         raise _fail(where, "a version-2 homography is 3 rows of 3 finite numbers")
+    if reading not in V2_READINGS:
+        raise _fail(where, f"unknown version-2 reading {reading!r}; use one of {', '.join(V2_READINGS)}")
     Kp, Hv2i = _v2_frame(calib)
-    H = (Hv2i @ F.reshape(3, 3)) @ np.linalg.inv(Kp)
+    if reading == "vector":
+        H = F.reshape(3, 3) @ np.linalg.inv(np.array(calib.K, dtype=np.float64))
+    else:
+        H = (Hv2i @ F.reshape(3, 3)) @ np.linalg.inv(Kp)
     if abs(H[2, 2]) < 1e-12:
         raise _fail(where, "maps the image to points at infinity; recalibrate the extrinsics")
     return validate_homography(H / H[2, 2], where)
 
 
-def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | None]:
+def v2_reading(doc: dict, text: str, where: str) -> str:
+    """Which matrix a version-2 file holds (see ``docs/robot.md``, "Duckietown's second robot").
+
+    * ``format: resolution-independent``: Duckietown's current writer (lib-dt-computer-vision
+      ``camera/homography.py``, ``HomographyToolkit.save_to_disk``), read with ``camera_specific``.
+    * no ``format`` key, written by dtscal (its header says so): the kit's own files before it wrote the key,
+      the same matrix.
+    * no ``format`` key otherwise: an older Duckietown file. Its DD24 reference (``scenario0/homography.yaml``,
+      2024-08-18) was written by ``notebooks/22-extrinsics-calibration-dd24.ipynb`` straight from
+      ``estimate_homography``: normalized image vectors of the 240x320 camera -> ground (the notebook prints the
+      same nine numbers). Duckietown's current ``load_from_disk`` refuses such a file (no ``format``).
+    """
+    fmt = doc.get("format")
+    if fmt is not None:
+        if str(fmt).strip().lower() != "resolution-independent":
+            raise _fail(where, f"version-2 format {fmt!r} is not supported (resolution-independent)")
+        return "independent"
+    return "independent" if "written by dtscal" in text else "vector"
+
+
+def read_extrinsic_file(path, intrinsics=None, reading: str | None = None) -> tuple[np.ndarray, str, str | None]:
     """Read a classic or version-2 ``camera_extrinsic`` file as ``(H, format, date)``.
 
     ``H`` is always the classic homography (rectified pixel -> ground metres); ``format`` is
     ``"classic"`` or ``"2"``; ``date`` the file's ISO date (None for classic). A version-2 file
-    needs ``intrinsics`` (an :class:`IntrinsicCalibration` or the path of one) to be converted.
+    needs ``intrinsics`` (an :class:`IntrinsicCalibration` or the path of one) to be converted;
+    ``reading`` (one of :data:`V2_READINGS`) overrides what :func:`v2_reading` infers from the file.
     """
     doc, where = _read_yaml(path)
     if "version" not in doc:
@@ -785,26 +848,30 @@ def read_extrinsic_file(path, intrinsics=None) -> tuple[np.ndarray, str, str | N
     if str(doc["version"]).strip() != "2":
         raise _fail(where, f"extrinsic file version {doc['version']!r} is not supported (classic or '2')")
     rows = doc.get("homography")
+    if isinstance(rows, list) and len(rows) == 9 and not any(isinstance(r, (list, dict)) for r in rows):
+        rows = [rows[0:3], rows[3:6], rows[6:9]]  # 9 numbers in a row: Duckietown's reader reshapes them (3, 3)
     if not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)):
-        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers")
+        raise _fail(where, "a version-2 file needs homography: as 3 rows of 3 numbers (or 9 numbers)")
     F = [[_number(v, where, f"homography[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
     if intrinsics is None:
         raise _fail(where, "is a version-2 (resolution-independent) file; pass the robot's intrinsic file "
                            "to convert it (--intrinsics camera_intrinsic/ROBOT.yaml)")
     calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
     date = doc.get("date")
-    return extrinsic_from_v2(F, calib, where), "2", None if date is None else str(date)
+    if reading is None:
+        reading = v2_reading(doc, Path(path).read_text(encoding="utf-8", errors="replace"), where)
+    return extrinsic_from_v2(F, calib, where, reading), "2", None if date is None else str(date)
 
 
 def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsics=None, date=None,
-                       rejected: bool = False) -> Path:
+                       rejected: bool = False, corrupt_rule: bool = True) -> Path:
     """Write ``camera_extrinsic/<robot>.yaml`` in the classic format (default) or as version ``"2"``.
 
     ``H`` is the classic homography; ``fmt="2"`` needs ``intrinsics`` (object or path) and stamps
     ``date`` (default now, ISO 8601). ``rejected`` writes ``<robot>.rejected.yaml`` beside, in either format.
     """
     if fmt == "classic":
-        return save_extrinsics(H, out_dir, robot, rejected=rejected)
+        return save_extrinsics(H, out_dir, robot, rejected=rejected, corrupt_rule=corrupt_rule)
     if fmt != "2":
         raise CalibrationFileError(f"extrinsic format {fmt!r} is unknown; use 'classic' or '2'")
     if intrinsics is None:
@@ -814,9 +881,11 @@ def save_extrinsics_as(H, out_dir, robot: str, *, fmt: str = "classic", intrinsi
     calib = intrinsics if isinstance(intrinsics, IntrinsicCalibration) else load_intrinsics(intrinsics)
     check_robot_name(robot)
     path = _target(extrinsic_path(out_dir, robot), rejected)
-    F = extrinsic_to_v2(H, calib)
+    F = extrinsic_to_v2(H, calib, corrupt_rule)
     stamp = (date or datetime.datetime.now()).isoformat() if not isinstance(date, str) else date
-    text = V2_HEADER + "\n" + _dump({"version": "2", "date": stamp, "homography": [[float(v) for v in r] for r in F]})
+    # "format" as Duckietown's save_to_disk writes it: its load_from_disk refuses a version-2 file without it
+    text = V2_HEADER + "\n" + _dump({"version": "2", "format": "resolution-independent", "date": stamp,
+                                     "homography": [[float(v) for v in r] for r in F]})
     try:
         return _atomic_write(path, text)
     except OSError as e:

@@ -170,7 +170,8 @@ def cmd_calibrate_extrinsics(args) -> int:
     run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
                                out_dir=None if args.no_write else args.out, fmt=args.format,
                                topic=args.topic, progress=_progress(not args.quiet, "frames"),
-                               keep_anyway=args.keep_anyway, max_seconds=args.max_seconds)
+                               keep_anyway=args.keep_anyway, max_seconds=args.max_seconds,
+                               robot_type=args.robot_type)
     committed, failed = _commit(args, run, "extrinsics")
     if args.json:
         _print_json({**run.to_dict(), "commit": committed, "commit_error": failed and str(failed)})
@@ -181,6 +182,9 @@ def cmd_calibrate_extrinsics(args) -> int:
         x, y = run.image_center_ground
         print(f"  image centre -> ground ({x:.3f}, {y:.3f}) m; corner residuals max "
               f"{run.residual_mm.max():.2f} mm")
+        fr = run.frames()
+        print(f"  frames: {fr['total']} read" + (f" of {fr['in_source']} (the first usable one is Duckietown's; "
+              f"{fr['not_read']} not read)" if "in_source" in fr else "") + f", {fr['used']} used")
         if run.camera_pose:
             print(f"  camera {run.camera_pose['height_m']:.3f} m above the ground, looking "
                   f"{run.camera_pose['pitch_down_deg']:.1f} degrees down")
@@ -295,6 +299,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("calibrate-extrinsics", help="ground homography from a frame of the robot on the board")
     common(sp)
     sp.add_argument("--intrinsics", required=True, help="Duckietown intrinsic YAML (camera_intrinsic/NAME.yaml)")
+    sp.add_argument("--robot-type", choices=["duckiebot", "dd24"], default=None,
+                    help="the robot on the board (default: the one the board implies: --square 0.017 is the DD24's)")
     sp.add_argument("--format", choices=["classic", "2"], default="classic",
                     help="extrinsic file: classic flat homography (default) or Duckietown's newer version 2")
     sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "

@@ -77,7 +77,7 @@ def default_H() -> np.ndarray:
     return np.array(DEFAULT_HOMOGRAPHY, dtype=np.float64).reshape(3, 3)
 
 
-# --- ROS camera_calibration (cameracalibrator.py) rules, used by detect.py and coverage.py ---
+# --- ROS camera_calibration (cameracalibrator.py) rules, used by detect/ and coverage.py ---
 #: a detection with any corner closer than this to the image border is rejected (pixels)
 BORDER_MARGIN_PX = 8
 #: X, Y, Size, Skew ranges a full bar needs

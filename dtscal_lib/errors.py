@@ -59,6 +59,7 @@ class Reason(StrEnum):
     # samples and views
     NOT_NEW_COVERAGE = "not_new_coverage"    #: too close to a sample already kept
     OUTLIER_VIEW = "outlier_view"            #: fits far worse than the other views
+    BOARD_SIZE = "board_size"                #: the pattern continues past the declared board's corners
     # the extrinsic frame
     BOARD_ORDER = "board_order"              #: corners cannot be ordered on the ground
     CORRUPT_HOMOGRAPHY = "corrupt_homography"  #: fitted H breaks Duckietown's H[1][2] rule

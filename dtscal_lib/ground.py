@@ -41,6 +41,7 @@ from .detect import detect_board_still, to_gray
 from .findings import Finding
 from .homography import apply_homography, as_homography, invert_homography
 from .limits import GROUND_CAMERA_LIMITS, MIRROR_MIN_CONTRAST
+from .profiles import DUCKIEBOT, RobotProfile, profile_for
 
 #: default RANSAC inlier threshold, metres on the ground (Duckietown passes OpenCV's
 #: default of 3, which in metres rejects nothing; 1 cm rejects a mis-detected corner)
@@ -201,14 +202,16 @@ def resize_to_width(image: np.ndarray, width: int = dt.IMAGE_SIZE[0]) -> np.ndar
 
 
 def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board = DUCKIETOWN_BOARD, *,
-                         method: str = "ransac") -> ExtrinsicResult:
+                         method: str = "ransac", profile: RobotProfile | None = None) -> ExtrinsicResult:
     """Duckietown's extrinsic calibration from one frame of the board lying in front of the robot.
 
     Steps: resize to the camera's width keeping the aspect ratio (640 for a Duckiebot),
     rectify with the intrinsics (``initUndistortRectifyMap(K, D, I, P)``), detect the
     board's inner corners, order them from the near-right corner
     (:func:`~dtscal_lib.boards.order_for_ground`), pair them with
-    :func:`~dtscal_lib.boards.ground_points`, fit ``H`` and reject a corrupt one.
+    :func:`~dtscal_lib.boards.ground_points`, fit ``H`` and reject a corrupt one. ``profile`` (default: the
+    one the board implies, :func:`~dtscal_lib.profiles.profile_for`) places the board on the ground and says
+    whether Duckietown's ``H[1][2] > 0`` rule applies (the Duckiebot's) and the colours are judged.
 
     Parameters
     ----------
@@ -230,6 +233,7 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
     if not isinstance(camera, CameraModel):
         raise CalibrationError(f"camera must be a CameraModel, got {type(camera).__name__}")
     image = _check_image(image)
+    profile = profile or profile_for(board)
     cw, ch = camera.size
     frame = resize_to_width(image, cw)
     if frame.shape[:2] != (ch, cw):
@@ -259,7 +263,7 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
         raise CalibrationError(
             f"the board ({board.describe()}) was not found in the rectified image; place the robot on the "
             "board as instructed (the board flat in front of the robot, fully in view, its long side across "
-            f"the view, the near row of inner corners {GROUND_NEAR_ROW_X} m ahead of the wheel axle), "
+            f"the view, the near row of inner corners {profile.near_row_x} m ahead of {_origin(profile)}), "
             "with even lighting and no glare", reason=det.reason or Reason.NO_BOARD,
         )
     corners = det.corners
@@ -267,9 +271,9 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
         ordered = order_for_ground(corners, board)
     except DtscalError as e:
         raise CalibrationError(str(e), reason=Reason.BOARD_ORDER) from e
-    ground = ground_points(board)
+    ground = ground_points(board, profile.near_row_x, profile.right_column_y)
     H = estimate_ground_homography(ordered, ground, method=method)
-    if dt.homography_is_corrupt(H):
+    if profile.corrupt_rule and dt.homography_is_corrupt(H):
         raise CalibrationError(
             f"the fitted homography has H[1][2] = {H[1, 2]:g} > 0, which Duckietown rejects as corrupt "
             "(the board looks mirrored or rotated); place the board as instructed and try again",
@@ -282,8 +286,15 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
     except DtscalError:
         raise CalibrationError("the image centre lies on the horizon of the fitted homography; "
                                "the camera must look down at the ground", reason=Reason.HORIZON) from None
-    return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground,
-                           board_pattern_contrast(rectified, ordered, board))
+    contrast = board_pattern_contrast(rectified, ordered, board) if profile.colours_known else None
+    return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground, contrast)
+
+
+def _origin(profile: RobotProfile, short: bool = False) -> str:
+    """What the robot frame's origin is, in words: a Duckiebot's is the midpoint of its wheel axle."""
+    if profile is DUCKIEBOT:
+        return "the axle" if short else "the wheel axle"
+    return "the robot's origin"
 
 
 def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN_BOARD) -> float | None:
@@ -291,8 +302,8 @@ def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN
 
     The board's squares between the inner corners, in ground order (:func:`~dtscal_lib.boards.order_for_ground`:
     square ``(r, c)`` is the ``r``-th row away from the robot and the ``c``-th column from its right),
-    are dark when ``r + c`` is even on Duckietown's printed pattern (the square outside the
-    near-right inner corner is dark, and a checkerboard alternates). Returns the mean grey level of
+    are light when ``r + c`` is even on Duckietown's printed A3 pattern (the corner square nearest the
+    robot on its right is white, ``duckietown.md``, and a checkerboard alternates). Returns the mean grey level of
     the squares that should be light minus that of those that should be dark: large and positive
     for a board seen the right way round, negative for a mirrored frame (a mirror swaps the
     colours of the squares against their ground positions, a rotation of the board by 180 degrees
@@ -314,8 +325,8 @@ def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN
     vals = cv2.remap(grey, pts[:, 0].reshape(-1, 1), pts[:, 1].reshape(-1, 1), cv2.INTER_LINEAR,
                      borderMode=cv2.BORDER_REPLICATE).reshape(board.rows - 1, board.cols - 1)
     r, c = np.mgrid[0:board.rows - 1, 0:board.cols - 1]
-    dark = (r + c) % 2 == 0
-    return float(vals[~dark].mean() - vals[dark].mean())
+    light = (r + c) % 2 == 0
+    return float(vals[light].mean() - vals[~light].mean())
 
 
 # --------------------------------------------------------------------------- plausibility
@@ -323,7 +334,7 @@ def board_pattern_contrast(image: np.ndarray, ordered, board: Board = DUCKIETOWN
 #: rows of the one table of belief (:mod:`dtscal_lib.limits`), from Duckietown's real fleet
 #: (camera 0.10-0.12 m high, 16-25 degrees down; ground-axis ratios: 95 % under 1.08, at most 1.22)
 
-def camera_pose_from_homography(H, K) -> dict:
+def camera_pose_from_homography(H, K, near_row_x: float = GROUND_NEAR_ROW_X) -> dict:
     """The camera's pose over the ground, recovered from a ground homography and ``K``.
 
     ``H`` maps rectified pixels to ground metres, so ``K^-1 H^-1 ~ [r1 r2 t]`` (the seed's
@@ -340,7 +351,7 @@ def camera_pose_from_homography(H, K) -> dict:
     M = np.linalg.solve(np.asarray(K, dtype=np.float64)[:3, :3], np.linalg.inv(_homography(H)))
     lam = 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
     r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
-    if (GROUND_NEAR_ROW_X * r1 + t)[2] < 0:  # the board must be in front of the camera
+    if (near_row_x * r1 + t)[2] < 0:  # the board must be in front of the camera
         r1, r2, t = -r1, -r2, -t
     U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
     R = U @ Wt
@@ -353,17 +364,17 @@ def camera_pose_from_homography(H, K) -> dict:
             "axis_angle_deg": float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))}
 
 
-def _turned_board(H, board: Board) -> np.ndarray:
+def _turned_board(H, board: Board, profile: RobotProfile) -> np.ndarray:
     """``H`` with the ground turned 180 degrees about the board's centre: the homography of an
     upside-down camera whose corners were ordered by their image position (the fleet's ``H[1][2] > 0``)."""
-    xc = float(ground_points(board)[:, 0].mean())
+    xc = float(ground_points(board, profile.near_row_x, profile.right_column_y)[:, 0].mean())
     T = np.array([[-1.0, 0.0, 2.0 * xc], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
     Ht = T @ H
     return Ht / Ht[2, 2]
 
 
-def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD,
-                             pattern_contrast: float | None = None) -> list[Finding]:
+def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD, pattern_contrast: float | None = None,
+                             profile: RobotProfile | None = None) -> list[Finding]:
     """Reasons to disbelieve that ``H`` shows a Duckiebot's camera looking down at the ground ahead.
 
     The pose of :func:`camera_pose_from_homography` is checked against :data:`GROUND_CAMERA_LIMITS`
@@ -385,39 +396,41 @@ def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD,
     []
     """
     H = _homography(H)
-    lim = GROUND_CAMERA_LIMITS
+    profile = profile or profile_for(board)
+    lim = GROUND_CAMERA_LIMITS if profile is DUCKIEBOT else profile.ground_limits
+    robot = "a Duckiebot's" if profile is DUCKIEBOT else f"the {profile.name.upper()}'s"
     out: list[Finding] = []
 
     def doubt(code, message, advice):
         out.append(Finding(code, "bad", message, advice))
 
-    rotated = dt.homography_is_corrupt(H)
-    pose = camera_pose_from_homography(_turned_board(H, board) if rotated else H, K)
+    rotated = profile.corrupt_rule and dt.homography_is_corrupt(H)
+    pose = camera_pose_from_homography(_turned_board(H, board, profile) if rotated else H, K, profile.near_row_x)
     place = ("place the robot on the board as instructed and check --square and --board against the printed "
              "board")
     lo, hi = lim["height_m"]
     if not lo <= pose["height_m"] <= hi:
         factor = pose["height_m"] / ((lo + hi) / 2)
         doubt("camera_height",
-              f"the camera would be {pose['height_m']:.3f} m above the ground (a Duckiebot's camera: {lo:g}-{hi:g} m)"
+              f"the camera would be {pose['height_m']:.3f} m above the ground ({robot} camera: {lo:g}-{hi:g} m)"
               + ((f"; printed squares {factor:.1f} times smaller than --square says would explain it" if factor > 1
                   else f"; printed squares {1 / factor:.1f} times larger than --square says would explain it")
                  if factor > 0 else ""),
-              "check --square against the printed board (Duckietown's: 0.031 m) and that the intrinsics are "
-              "this camera's")
+              f"check --square against the printed board ({profile.name}: {profile.board.square:g} m; "
+              "--robot-type names the robot) and that the intrinsics are this camera's")
     lo, hi = lim["pitch_down_deg"]
     if not lo <= pose["pitch_down_deg"] <= hi:
         doubt("camera_pitch",
-              f"the camera would look {pose['pitch_down_deg']:.1f} degrees below the horizon (a Duckiebot's "
+              f"the camera would look {pose['pitch_down_deg']:.1f} degrees below the horizon ({robot} "
               f"camera: {lo:g}-{hi:g})", place)
     if abs(pose["yaw_deg"]) > lim["abs_yaw_deg"]:
         doubt("camera_yaw",
               f"the camera would look {pose['yaw_deg']:.0f} degrees to the side of the robot's forward axis "
               f"(at most {lim['abs_yaw_deg']:g})", place)
-    if pose["position_m"][0] >= GROUND_NEAR_ROW_X:
+    if pose["position_m"][0] >= profile.near_row_x:
         doubt("camera_position",
-              f"the camera would stand {pose['position_m'][0]:.3f} m ahead of the axle, on or beyond the board "
-              f"(its near row is at {GROUND_NEAR_ROW_X} m)", place)
+              f"the camera would stand {pose['position_m'][0]:.3f} m ahead of {_origin(profile, short=True)}, on or "
+              f"beyond the board (its near row is at {profile.near_row_x} m)", place)
     ratio = max(pose["axis_ratio"], 1 / pose["axis_ratio"])
     if ratio > lim["axis_ratio"] or abs(pose["axis_angle_deg"] - 90) > lim["axis_angle_error_deg"]:
         doubt("not_a_plane_view",

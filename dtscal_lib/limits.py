@@ -6,7 +6,8 @@ Three judges use these numbers, and they answer with :class:`~dtscal_lib.finding
   beyond these limits is not written over the robot's file (``dtscal`` exits 3; ``--keep-anyway``
   writes it beside);
 * **refusal of a ground homography** (:func:`dtscal_lib.ground.ground_homography_doubts`): the camera
-  it implies must be a Duckiebot's, the board seen from above the right way round;
+  it implies must be the robot's (a Duckiebot's or the DD24's, :mod:`dtscal_lib.profiles`), the board seen
+  from above the right way round;
 * **the verdict** (:func:`dtscal_lib.quality.assess`): ``good`` / ``doubtful`` / ``bad``. The tilt of the
   boards is judged here once for all three, and so are the verdict's fit, uncertainty and
   systematic-residual thresholds (:mod:`dtscal_lib.quality` imports them).
@@ -28,7 +29,10 @@ Data sources
   fx 317-339 px, fx/fy 0.991-1.012, principal point within 1.6 % (x) and 6.1 % (y) of the centre.
   The robot's factory files (``duckietown.md``) give 0.102 m, 25.3 degrees.
 * **duckietown.md**: real per-robot intrinsic files have fx from 305 to 397 px at 640x480.
-* **real photographs**: OpenCV's sample photographs in ``data/real/`` (tests/test_detect_real.py).
+* **real photographs**: OpenCV's sample photographs in ``data/real/`` (a 9x6 board, left and right cameras).
+* **Duckietown's DD24 files**: ``data/duckietown/dd24/`` (lib-dt-computer-vision's DD24 assets and boards.py).
+
+A kit test, the kit's rendering or its own recording is a check of a row, never its source (``tests/test_limits.py``).
 
 ``python -m dtscal_lib.limits`` prints the table (the text of ``docs/limits.md``).
 """
@@ -38,7 +42,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 __all__ = ["Limit", "TABLE", "LIMITS", "INTRINSIC_LIMITS", "GROUND_CAMERA_LIMITS", "MIN_TILT_SPREAD_DEG",
-           "FOCAL_STD_UNDETERMINED", "TILT_BAD_DEG", "TILT_DOUBTFUL_DEG", "MIRROR_MIN_CONTRAST", "table_text"]
+           "FOCAL_STD_UNDETERMINED", "TILT_BAD_DEG", "TILT_DOUBTFUL_DEG", "MIRROR_MIN_CONTRAST", "GRID_TOLERANCE_PX",
+           "GRID_TOLERANCE_FRACTION", "SMOOTH_GRID_TOLERANCE", "PATTERN_CONTINUES_SHARE", "table_text"]
 
 
 @dataclass(frozen=True)
@@ -59,14 +64,18 @@ TABLE: tuple[Limit, ...] = (
     Limit("min_tilt_spread", 3.0, "degrees", "calibration: cannot be computed (CalibrationError)",
           "board normals all within this of their mean leave Zhang's constraints rank-deficient: no focal "
           "length, no principal point (a limit of the mathematics, not a belief)",
-          "Zhang (2000): parallel planes are a degenerate configuration; the value calibration.py used"),
+          "Zhang (2000), 'A flexible new technique for camera calibration', IEEE PAMI 22(11), section on "
+          "degenerate configurations: parallel planes add no constraint"),
     Limit("tilt_bad", 10.0, "degrees", "refusal (plausibility) and verdict 'bad' (quality)",
           "below it the focal length and principal point trade off against the board distance: "
           "computable, but not to be believed; the one value of both judges",
-          "chosen, not measured: the value plausibility.py and quality.py both used before this table; "
-          "issue 15's three near-parallel views are refused by it"),
+          "OpenCV's real left and right photographs (data/real/, 13 views each): normals spread 40.6 degrees, "
+          "four times this; ROS's calibrator wants its Skew bar full, a corner angle 14 degrees off square "
+          "(duckietown.md: Skew = 2 |pi/2 - angle|, full at 0.5). Chosen between the two, not measured finer"),
     Limit("tilt_doubtful", 20.0, "degrees", "verdict 'doubtful' (quality)",
-          "the bottom of the 20-45 degree tilt the kit advises", "chosen, not measured: quality.py's value"),
+          "the bottom of the 20-45 degree tilt the kit advises",
+          "OpenCV's real photographs (data/real/): 40.6 degrees, twice this; ROS's full Skew bar (14 degrees off "
+          "square, duckietown.md) is near it. Chosen, not measured finer"),
     # ------------------------------------------------------------------ the verdict of an intrinsic calibration
     Limit("fit_ratio_doubtful", 1.5, "residual sigma / corner noise", "verdict (quality): richer models are fitted",
           "above it the residual is more than the corner noise measured without a model: the finer lens models "
@@ -117,7 +126,7 @@ TABLE: tuple[Limit, ...] = (
     Limit("corner_sigma_bad", 4.0, "px, mean 1-sigma at the image corners", "verdict 'bad' (quality)",
           "four pixels at the corners is a calibration the data does not support",
           "above every real set measured (left 1.61 px); eight synthetic views all in the middle of the image "
-          "reach more (a check, not a source: tests/test_verdict_real.py)"),
+          "reach more (a check of the kit's, not a source)"),
     Limit("view_outlier_factor", 3.0, "view RMS / median view RMS", "verdict (quality): the view is named",
           "one view fitting far worse than the others is a wrong detection or a moved board",
           "chosen, not measured: as the kit's outlier-view rejection of the pipeline"),
@@ -164,7 +173,8 @@ TABLE: tuple[Limit, ...] = (
           "of a jackknife)"),
     Limit("focal_std_undetermined", 0.25, "sigma(f) / f", "calibration: cannot be computed (CalibrationError)",
           "a focal length known only to +-25 % is not determined (a limit of the data, not a belief)",
-          "chosen: the value calibration.py used"),
+          "OpenCV's real photographs (data/real/, 13 views each): sigma(fx)/fx 0.12-0.15 %, two hundred times "
+          "below; a limit of the data, no camera is near it"),
     Limit("min_distinct_views", 3, "views", "refusal (plausibility)",
           "views that differ only by a shift in the image are one board image; Zhang needs 3 distinct",
           "Zhang (2000); issue 15's forty shifted copies (fx 186 for 308)"),
@@ -190,11 +200,61 @@ TABLE: tuple[Limit, ...] = (
           "the ground's x and y axes are perpendicular",
           "fleet sample: 88.2-90.0 degrees apart"),
     Limit("mirror_min_contrast", 10.0, "grey levels", "refusal (ground): board seen mirrored",
-          "the checkerboard's squares seen from above must have the printed pattern's colours (the square "
-          "outside the near-right inner corner dark); a mirrored frame swaps them. Below this contrast "
+          "the checkerboard's squares seen from above must have the printed pattern's colours (the corner "
+          "square nearest the robot on its right white); a mirrored frame swaps them. Below this contrast "
           "between light and dark squares the colours are not trusted and nothing is said",
-          "Duckietown's printed pattern (tests/test_ground.py: near-right square dark); the synthetic "
-          "session's rectified floor views show +176 to +181 grey levels, their mirror images -176 to -181"),
+          "Duckietown's printed A3 extrinsic pattern (rev 04/2024; duckietown.md: near-right corner square white, "
+          "near-left black, far-left white, far-right black), as real Duckiebot and Duckietown-simulator frames "
+          "show it: +125 and +254 grey levels the right way round, -125 and -254 mirrored (issue 21); 10 is "
+          "far below both and above the noise of a grey level's mean over 24 squares"),
+    # ------------------------------------------------------------------ robot profiles (dtscal_lib.profiles)
+    Limit("robot_fx_per_width", (0.381, 0.744), "fx / image width", "loading a Duckiebot's intrinsic file: "
+          "a one-line warning",
+          "20 % beyond the fleet's range either way: a file outside is another camera or a wrong calibration "
+          "(fx 1691 / fy 1412 is a 21-degree lens, fx 237 a fisheye's), loaded but named",
+          "duckietown.md: real per-robot intrinsic files have fx 305-397 px at 640 px (0.477-0.620 of the width)"),
+    Limit("dd24_fx_per_width", (0.515, 0.773), "fx / image width", "loading a DD24 intrinsic file: a one-line "
+          "warning",
+          "20 % either way of the one real DD24 file, as for the Duckiebot",
+          "lib-dt-computer-vision assets/extrinsics/dd24/real-world/scenario0/calibration-intrinsic-dd24.yaml: "
+          "fx 154.59 px at 240 px (0.644), kept in data/duckietown/dd24/"),
+    Limit("dd24_camera_height", (0.04, 0.075), "m above the board", "refusal (ground), DD24 profile",
+          "the DD24's camera seen in Duckietown's real photograph, with the Duckiebot's margins (-30 %, +30 %): "
+          "a 17 mm board declared 1.5 times too big or small lands outside",
+          "Duckietown's real DD24 extrinsic photograph (lib-dt-computer-vision assets/extrinsics/dd24/real-world/"
+          "scenario0) with its intrinsic file: camera 5.6 cm above the board (issue 21's measurement)"),
+    Limit("dd24_camera_pitch", (35.0, 60.0), "degrees below the horizon", "refusal (ground), DD24 profile",
+          "the DD24's camera looks steeply down at its board; 12 degrees of margin either side, as the Duckiebot's",
+          "Duckietown's real DD24 extrinsic photograph (scenario0) with its intrinsic file: 47 degrees down "
+          "(issue 21's measurement)"),
+    # ------------------------------------------------------------------ the board's declared size
+    Limit("pattern_continues_share", 0.5, "share of the views where the board is found",
+          "calibration: refused in words, nothing calibrated ('pass --board CxR')",
+          "when the corners go on past the declared board in this share of the views, the board is bigger than "
+          "declared and every view is a sub-grid found at some place on it (a 4x3 declaration gave fx 106991 px)",
+          "OpenCV's 26 real photographs of a 9x6 board (data/real/): declared 9x6, the pattern continues in 0 of "
+          "26 views; declared 8x6 in 23 of 23, 4x3 in 7 of 7, 8x5 in 1 of 1; half is far from both"),
+    # ------------------------------------------------------------------ refusal of a found board (the detector)
+    Limit("grid_tolerance_px", 1.0, "px from the quadratic through 8 neighbours", "detector: board refused "
+          "'inconsistent_grid' (the corner named)",
+          "a corner this far off the smooth grid of its neighbours jumped off the board (a pulled refinement); "
+          "twice the largest flat jump measured, so a true corner passes and a smoothly curled print too",
+          "OpenCV's 26 real photographs (data/real/, 728 inner corners): jumps median 0.12 px, 99th percentile "
+          "0.36 px, at most 0.49 px (0.017 of a square); the same photographs curled (cv2.remap, Duckietown's "
+          "17 mm squares at 12-23 px): at most 0.75 px; Duckietown's curled DD24 print (lib-dt-computer-vision "
+          "assets) passes (benchmarks/grid_tolerance.py prints these)"),
+    Limit("grid_tolerance_fraction", 0.1, "of the corner's local square", "detector: as grid_tolerance_px "
+          "(whichever is larger)",
+          "big squares have proportionally bigger print and perspective deviations",
+          "OpenCV's 26 real photographs (data/real/): at most 0.017 of a square flat, 0.033 curled; a corner "
+          "displaced by a sixth of a square (0.17) is caught"),
+    Limit("smooth_grid_tolerance", 0.2, "of the smallest corner spacing", "detector: board refused "
+          "'inconsistent_grid' (the smooth-grid guard)",
+          "a flat board through perspective and a smooth lens is a cubic in the corner indices; a corner off "
+          "it by a fifth of a square is a wrong corner",
+          "true corners fit the cubic to 0.08 of a spacing (1500 random Duckiebot poses 0.18-1.3 m, tilts "
+          "up to 57 degrees, through Duckietown's default camera intrinsics, duckietown.md); OpenCV's 26 real "
+          "photographs (data/real/) all pass, 2 of 52 of them waved by 5 px are refused"),
     Limit("cross_validation_ratio", 2.0, "half-set difference / predicted 1-sigma (median of the splits)",
           "verdict 'doubtful' (calibrate-intrinsics --cross-validate)",
           "two independent calibrations differ by more than 2 sigma of their difference 5 % of the time; a "
@@ -210,6 +270,12 @@ FOCAL_STD_UNDETERMINED = LIMITS["focal_std_undetermined"].value
 TILT_BAD_DEG = LIMITS["tilt_bad"].value
 TILT_DOUBTFUL_DEG = LIMITS["tilt_doubtful"].value
 MIRROR_MIN_CONTRAST = LIMITS["mirror_min_contrast"].value
+#: the detector's refusal of a found board (:mod:`dtscal_lib.detect.grid`)
+GRID_TOLERANCE_PX = LIMITS["grid_tolerance_px"].value
+GRID_TOLERANCE_FRACTION = LIMITS["grid_tolerance_fraction"].value
+SMOOTH_GRID_TOLERANCE = LIMITS["smooth_grid_tolerance"].value
+#: a board declared smaller than it is (:meth:`dtscal_lib.session.IntrinsicSession.calibrate`)
+PATTERN_CONTINUES_SHARE = LIMITS["pattern_continues_share"].value
 
 #: the verdict's thresholds (:func:`dtscal_lib.quality.assess`)
 FIT_RATIO_DOUBTFUL = LIMITS["fit_ratio_doubtful"].value

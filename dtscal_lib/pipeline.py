@@ -122,10 +122,11 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
         ``size_mismatch`` and skipped.
     """
     check_board(board)
-    session = IntrinsicSession(board, model=model, skew=skew, image_size=image_size)
-    src = _open_frames(source_spec, topic, max_seconds, session.ready)
-    session.robot = _robot(robot, src, out_dir is not None)
-    session.stream, session.source = src.is_stream, src.describe()
+    # a live camera stops once the session is ready: the session is made (whole) right after the source
+    src = _open_frames(source_spec, topic, max_seconds, lambda: session.ready())
+    session = IntrinsicSession(board, model=model, skew=skew, image_size=image_size,
+                               robot=_robot(robot, src, out_dir is not None), stream=src.is_stream,
+                               source=src.describe())
     if out_dir is not None:
         check_output_folder(out_dir)
     for frame in (progress(src) if progress else src):
@@ -155,6 +156,18 @@ class ExtrinsicRun:
     doubts: list = field(default_factory=list)
     #: the session that made it (write in another format, commit)
     session: ExtrinsicSession | None = field(default=None, repr=False)
+    #: frames the source holds (None for a live camera): the run reads only up to the first usable one
+    frames_in_source: int | None = None
+
+    def frames(self) -> dict:
+        """The frame counts: ``total`` read, ``used``, ``rejected`` by reason and, for a recording,
+        ``in_source`` and ``not_read`` (the frames after the first usable one, which Duckietown's procedure
+        does not need), so that ``total + not_read == in_source``."""
+        out = self.tally.to_dict()
+        if self.frames_in_source is not None:
+            out["in_source"] = self.frames_in_source
+            out["not_read"] = max(0, self.frames_in_source - self.tally.total)
+        return out
 
     def to_dict(self) -> dict:
         return {
@@ -164,7 +177,7 @@ class ExtrinsicRun:
             "frame_index": self.frame_index,
             "image_center_ground_m": [float(v) for v in self.image_center_ground],
             "corner_residual_mm": {"max": float(np.max(self.residual_mm)), "mean": float(np.mean(self.residual_mm))},
-            "frames": self.tally.to_dict(),
+            "frames": self.frames(),
             "output": str(self.path) if self.path else None,
             "camera_pose": dict(self.camera_pose),
             "doubts": [str(d) for d in self.doubts],
@@ -174,7 +187,7 @@ class ExtrinsicRun:
 def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIETOWN_BOARD,
                          robot: str | None = None, out_dir=None, topic: str | None = None,
                          progress=None, keep_anyway: bool = False, max_seconds: float | None = None,
-                         fmt: str = "classic") -> ExtrinsicRun:
+                         fmt: str = "classic", robot_type: str | None = None) -> ExtrinsicRun:
     """Duckietown's extrinsic procedure on the first usable frame of a source.
 
     ``intrinsics_file`` is a Duckietown intrinsic YAML; the homography maps pixels of the
@@ -183,7 +196,10 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
     classic format or (``fmt="2"``) Duckietown's version 2, if the homography describes a camera
     looking down at the ground ahead (:func:`~dtscal_lib.ground.ground_homography_doubts`);
     ``keep_anyway`` as in :func:`calibrate_intrinsics` (the rejected file in the same format).
+    ``robot_type`` (``"duckiebot"``, ``"dd24"``) overrides the robot the board implies (:mod:`dtscal_lib.profiles`).
     """
+    from .profiles import profile_for
+
     from . import calib_files
 
     check_board(board)
@@ -192,16 +208,21 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
                      hint="; give the intrinsic file of the camera that took these frames (--intrinsics)")
     src = _open_frames(source_spec, topic, max_seconds)
     session = ExtrinsicSession(calib.camera(), board, robot=_robot(robot, src, out_dir is not None),
-                               keep="first", intrinsics=calib, source=src.describe())
+                               keep="first", intrinsics=calib, source=src.describe(),
+                               profile=profile_for(board, robot_type))
     if out_dir is not None:
         check_output_folder(out_dir)
+    try:
+        in_source = len(src)
+    except TypeError:  # a live camera: no end
+        in_source = None
     for frame in (progress(src) if progress else src):
         if session.offer(frame).added:
             break
     res = session.calibrate()
     run = ExtrinsicRun(session.robot, res.H, session.best_frame, session.tally(), np.asarray(res.residual_mm),
                        np.asarray(res.image_center_ground), session.source, camera_pose=session.camera_pose(),
-                       session=session)
+                       session=session, frames_in_source=in_source)
     run.path = session.write(out_dir, keep_anyway, fmt)
     run.doubts = session.doubts
     return run

@@ -82,10 +82,16 @@ def intrinsic_doubts(result: CalibrationResult, image_points=None) -> list[Findi
               "the frames")
     fov = float(np.degrees(2 * np.arctan2(w / 2.0, fx)))
     lo, hi = lim["fov_deg"]
-    if not lo <= fov <= hi:
+    if not lo <= fov <= hi and lo / 2 <= fov:
         doubt("field_of_view",
               f"fx = {fx:.1f} px gives a {fov:.0f}-degree field of view across {w} px (plausible: {lo:g}-{hi:g})",
               "check --square and the image size, and recalibrate with tilted views")
+    elif not lo <= fov <= hi:  # not a lens at all: the number itself would mislead, so it is not shown
+        doubt("field_of_view",
+              f"the focal length found describes no camera (a field of view far below {lo:g} degrees): the views "
+              "do not fit the declared board",
+              "check --board (count the inner corners) and --square against the printed board, and recalibrate "
+              "with tilted views")
     lo, hi = lim["aspect"]
     if not lo <= fx / fy <= hi:
         doubt("aspect", f"fx / fy = {fx / fy:.2f} (a camera with square pixels has about 1; plausible {lo:g}-{hi:g})",

@@ -35,7 +35,7 @@ class CommitError(DtscalError):
 
 
 def _robot(robot: str) -> str:
-    if not isinstance(robot, str) or not robot or not all(c.isalnum() or c == "_" for c in robot):
+    if not calib_files.is_robot_name(robot):
         raise CommitError(f"robot name {robot!r} is not a Duckiebot name (letters, digits, '_'); pass --robot NAME")
     return robot
 

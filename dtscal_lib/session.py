@@ -44,6 +44,7 @@ from .coverage import CoverageTracker
 from .detect import detect_board
 from .errors import CalibrationError, DtscalError, ImplausibleCalibrationError, Reason, opencv_message
 from .findings import Finding
+from .limits import PATTERN_CONTINUES_SHARE, VIEW_OUTLIER_FACTOR
 
 __all__ = ["IntrinsicSession", "ExtrinsicSession", "Offer", "FrameTally", "SizeGroups", "as_findings",
            "robot_from_topic", "robot_name", "camera_name", "intrinsic_file", "calibrate_without_outlier_views",
@@ -51,8 +52,9 @@ __all__ = ["IntrinsicSession", "ExtrinsicSession", "Offer", "FrameTally", "SizeG
 
 #: fewer samples than this cannot give a trustworthy calibration
 MIN_SAMPLES = 3
-#: a view whose own reprojection RMS exceeds this many times the median view's is an outlier
-OUTLIER_FACTOR = 3.0
+#: a view whose own reprojection RMS exceeds this many times the median view's is an outlier (the verdict's
+#: value, one row of :mod:`dtscal_lib.limits`)
+OUTLIER_FACTOR = VIEW_OUTLIER_FACTOR
 #: never drop more than this share of the views as outliers
 MAX_OUTLIER_SHARE = 0.2
 
@@ -62,7 +64,7 @@ def robot_from_topic(topic: str | None) -> str | None:
     """``/autobot01/camera_node/image/compressed`` -> ``autobot01``."""
     if not topic:
         return None
-    m = re.match(r"^/([A-Za-z0-9_]+)/camera_node/", topic)
+    m = re.match(rf"^/({calib_files.ROBOT_NAME.pattern})/camera_node/", topic)
     return m.group(1) if m else None
 
 
@@ -114,6 +116,19 @@ def as_findings(items, kind: str = "intrinsic") -> list[Finding]:
         else:
             out.append(Finding(f"implausible_{kind}", "bad", str(item), ""))
     return out
+
+
+def _gate(session, *, writing: bool, keep_anyway: bool = False) -> tuple[str, list[Finding]]:
+    """The one gate of WRITE and COMMIT: ``(robot, refusals)``, judged before any file or message.
+
+    ``writing=False`` (only judging) accepts a missing robot name; a refused result raises
+    :class:`~dtscal_lib.errors.ImplausibleCalibrationError` unless ``keep_anyway`` (never for COMMIT:
+    its caller passes ``keep_anyway=False``)."""
+    refusals = session.refusals()
+    robot = calib_files.check_robot_name(session.robot) if writing else (session.robot or "camera")
+    if refusals and not keep_anyway:
+        raise _refusal(refusals, session.kind, robot)
+    return robot, refusals
 
 
 def _refusal(refusals, kind: str, robot: str) -> ImplausibleCalibrationError:
@@ -316,6 +331,8 @@ class IntrinsicSession:
         self._bars: list = []
         self._quality = None
         self._refusals: list[Finding] | None = None
+        #: found detections by the bigger pattern the saddles showed around them (None: the declared size)
+        self._patterns: Counter = Counter()
 
     # ---- frames
     def offer(self, frame) -> Offer:
@@ -347,6 +364,7 @@ class IntrinsicSession:
             return Offer(False, reason, det, img)
         with self.lock:
             group.found += 1
+            self._patterns[det.pattern_seen] += 1
             index = getattr(frame, "index", None)
             if self.stream:
                 added = group.tracker.offer(det, index)
@@ -360,6 +378,24 @@ class IntrinsicSession:
             group.img.append(det.corners)
             group.tally.used += 1
             return Offer(True, None, det, img)
+
+    def _check_board_size(self) -> None:
+        """Refuse, in words, a board declared smaller than it is: in most views the saddles continue past the
+        declared corners as equally strong corners (:attr:`~dtscal_lib.detect.Detection.pattern_seen`), so
+        each view is a sub-grid found somewhere on the board and the calibration would be nonsense."""
+        with self.lock:
+            found = sum(self._patterns.values())
+            bigger = [(n, size) for size, n in self._patterns.items() if size is not None]
+        if not bigger or found < 2:
+            return
+        n, (cols, rows) = max(bigger)
+        if n >= PATTERN_CONTINUES_SHARE * found:
+            raise CalibrationError(
+                f"the pattern continues past the declared corners: in {n} of the {found} views where the declared "
+                f"{self.board.cols}x{self.board.rows} board was found, the board's corners go on beyond it "
+                f"({cols}x{rows} inner corners are seen), so each view would be a part of the board found at some "
+                f"place on it and the calibration meaningless. Nothing was calibrated: pass --board {cols}x{rows} "
+                "(count the inner corners, where four squares meet)", reason=Reason.BOARD_SIZE)
 
     def skipped(self, counts) -> None:
         """Count frames a source skipped itself (corrupt frames of a live camera), by reason."""
@@ -443,6 +479,7 @@ class IntrinsicSession:
                 f"({tally.total} frames; rejected: {dict(tally.rejected)}). Calibration needs at least "
                 f"{MIN_SAMPLES} views at different positions and tilts: check --board/--square, and show the "
                 "whole board (not touching the image border) at several places and angles")
+        self._check_board_size()
         if solver is not None:
             result, dropped = solver.calibrate(obj, img, size, self.model, skew=self.skew)
         else:
@@ -521,10 +558,7 @@ class IntrinsicSession:
             raise DtscalError(f"intrinsic files have one format (classic), not {fmt!r}")
         if self.result is None:
             raise DtscalError("nothing to write yet: CALIBRATE first")
-        refusals = self.refusals()  # judged first: the gate before any file
-        robot = calib_files.check_robot_name(self.robot) if out is not None else (self.robot or "camera")
-        if refusals and not keep_anyway:
-            raise _refusal(refusals, self.kind, robot)
+        robot, refusals = _gate(self, writing=out is not None, keep_anyway=keep_anyway)
         if out is None:
             return None
         self.path = calib_files.save_intrinsics(self.calibration(), out, robot, rejected=bool(refusals))
@@ -539,10 +573,7 @@ class IntrinsicSession:
 
         if self.result is None:
             raise DtscalError("nothing to commit yet: CALIBRATE first")
-        refusals = self.refusals()
-        robot = calib_files.check_robot_name(self.robot)
-        if refusals:
-            raise _refusal(refusals, self.kind, robot)
+        robot, _ = _gate(self, writing=True)
         path = self.path or calib_files.save_intrinsics(self.calibration(), tempfile.mkdtemp(prefix="dtscal-commit-"),
                                                         robot)
         kw = {} if timeout is None else {"timeout": timeout}
@@ -563,8 +594,12 @@ class ExtrinsicSession:
     kind = "extrinsic"
 
     def __init__(self, camera: CameraModel | None, board: Board = DUCKIETOWN_BOARD, *, robot: str | None = None,
-                 keep: str = "first", intrinsics=None, source: str = "the frames"):
+                 keep: str = "first", intrinsics=None, source: str = "the frames", profile=None):
+        from .profiles import profile_for
+
         self.board, self.robot, self.keep, self.intrinsics, self.source = board, robot, keep, intrinsics, source
+        #: the robot the board lies in front of (:mod:`dtscal_lib.profiles`; by default the one the board implies)
+        self.profile = profile or profile_for(board)
         #: the camera whose rectified image the homography maps (settable: a new intrinsic calibration)
         self.camera = camera
         self.lock = threading.RLock()
@@ -593,7 +628,7 @@ class ExtrinsicSession:
         if cam is None:
             raise DtscalError("no intrinsic calibration yet: CALIBRATE the intrinsics first")
         try:
-            res = extrinsics_from_image(img, cam, self.board)
+            res = extrinsics_from_image(img, cam, self.board, profile=self.profile)
         except DtscalError as exc:  # counted under the frame's own reason (size, NaN, board, homography)
             reason = exc.reason or Reason.HOMOGRAPHY_FAILED
             self._tally.reject(reason)
@@ -635,7 +670,7 @@ class ExtrinsicSession:
         """The camera's height and pitch recovered from the kept homography."""
         from .ground import camera_pose_from_homography
 
-        return camera_pose_from_homography(self.calibrate().H, self.camera.P[:, :3])
+        return camera_pose_from_homography(self.calibrate().H, self.camera.P[:, :3], self.profile.near_row_x)
 
     def refusals(self) -> list[Finding]:
         """Why the kit does not believe the homography (a camera looking down at the ground ahead?)."""
@@ -643,7 +678,8 @@ class ExtrinsicSession:
 
         res = self.calibrate()
         return as_findings(ground_homography_doubts(res.H, self.camera.P[:, :3], board=self.board,
-                                                    pattern_contrast=getattr(res, "pattern_contrast", None)),
+                                                    pattern_contrast=getattr(res, "pattern_contrast", None),
+                                                    profile=self.profile),
                            self.kind)
 
     @property
@@ -666,15 +702,12 @@ class ExtrinsicSession:
         ``ROBOT.rejected.yaml`` beside the robot's file, in the format asked for.
         """
         res = self.calibrate()
-        refusals = self.refusals()  # judged first: the gate before any file
-        robot = calib_files.check_robot_name(self.robot) if out is not None else (self.robot or "camera")
-        if refusals and not keep_anyway:
-            raise _refusal(refusals, self.kind, robot)
+        robot, refusals = _gate(self, writing=out is not None, keep_anyway=keep_anyway)
         if out is None:
             return None
         intrinsics = self._intrinsics() if fmt == "2" else None
         self.path = calib_files.save_extrinsics_as(res.H, out, robot, fmt=fmt, intrinsics=intrinsics,
-                                                   rejected=bool(refusals))
+                                                   rejected=bool(refusals), corrupt_rule=self.profile.corrupt_rule)
         return self.path
 
     def commit(self, *, master_uri: str | None = None, timeout: float | None = None, url: str | None = None,
@@ -686,12 +719,9 @@ class ExtrinsicSession:
         from . import robot as robot_link
 
         res = self.calibrate()
-        refusals = self.refusals()
-        robot = calib_files.check_robot_name(self.robot)
-        if refusals:
-            raise _refusal(refusals, self.kind, robot)
+        robot, _ = _gate(self, writing=True)
         path = self.path or calib_files.save_extrinsics_as(
             res.H, tempfile.mkdtemp(prefix="dtscal-commit-"), robot, fmt=fmt,
-            intrinsics=self._intrinsics() if fmt == "2" else None)
+            intrinsics=self._intrinsics() if fmt == "2" else None, corrupt_rule=self.profile.corrupt_rule)
         kw = {} if timeout is None else {"timeout": timeout}
         return robot_link.commit_extrinsics(robot, path, master_uri=master_uri, url=url, **kw)

@@ -313,11 +313,15 @@ def _footprint(a: np.ndarray) -> np.ndarray:
 
 
 def _sheet_texture(bx: np.ndarray, by: np.ndarray, ok: np.ndarray, board: Board, sheet: Sheet,
-                   shade: tuple[float, float, float]):
+                   shade: tuple[float, float, float], first_square_light: bool = False):
     """Reflectance (grey) and coverage of the sheet at board coordinates ``(bx, by)`` (metres).
 
     The squares are anti-aliased analytically (see :func:`_filtered_square_wave`) over
     each sub-pixel's footprint, then the sub-pixels are area-averaged by the caller.
+    ``first_square_light``: the square between the first two inner corners of each axis (and so
+    the corner square outside the first inner corner) is light, as on Duckietown's printed A3
+    extrinsic pattern lying at its place (the first inner corner the near-right one: the corner
+    square nearest the robot on its right is white; ``duckietown.md``); otherwise dark.
     """
     s = board.square
     cx, cy = board.centre[:2]
@@ -328,7 +332,7 @@ def _sheet_texture(bx: np.ndarray, by: np.ndarray, ok: np.ndarray, board: Board,
     sq = _filtered_square_wave(u, wu) * _filtered_square_wave(v, wv)
     in_u = np.clip(0.5 + np.minimum(u + 1.0, board.cols - u) / np.maximum(wu, 1e-12), 0.0, 1.0)
     in_v = np.clip(0.5 + np.minimum(v + 1.0, board.rows - v) / np.maximum(wv, 1e-12), 0.0, 1.0)
-    black = in_u * in_v * 0.5 * (1.0 + sq)
+    black = in_u * in_v * 0.5 * (1.0 + (-sq if first_square_light else sq))
     refl = sheet.paper + (sheet.ink - sheet.paper) * black
     # smooth uneven lighting across the sheet (a lamp to one side)
     base, gx, gy = shade
@@ -920,7 +924,8 @@ def extrinsic_capture(seed: int = DEFAULT_SEED, *, n_frames: int = 5, mount: Rob
     def tex(X, Y, ok):
         col, cov = floor(X, Y, ok)
         bx, by = Y - g0[1], X - g0[0]
-        val, on_paper = _sheet_texture(bx, by, ok, board, sheet, (225.0, 0.05, -0.08))
+        # Duckietown's printed pattern as it lies: the corner square nearest the robot on its right is white
+        val, on_paper = _sheet_texture(bx, by, ok, board, sheet, (225.0, 0.05, -0.08), first_square_light=True)
         paper = on_paper > 0
         col[paper] = val[paper][:, None] * np.ones(3, dtype=np.float32)
         return col, np.maximum(cov, on_paper)

@@ -37,8 +37,14 @@ if [ "${1:-}" = "--test" ]; then
   bash scripts/install-browser.sh
   echo "setup: JupyterHub's proxy (npm, into .hub/) for the hub test" >&2
   bash scripts/install-hub.sh
+  echo "setup: bubblewrap, the sandbox dtscal grade runs student code in" >&2
+  bash scripts/install-sandbox.sh
 else
   echo "setup: installing the kit into .venv (pip lists each package)" >&2
   .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on $QUIET -e .
+  if ! command -v bwrap >/dev/null 2>&1; then
+    echo "setup: to grade (dtscal grade), also run scripts/install-sandbox.sh (as root or with sudo): it installs" >&2
+    echo "       bubblewrap, the sandbox student code runs in (without it the grader holds fewer barriers and says so)" >&2
+  fi
 fi
 echo "setup: done" >&2

@@ -74,9 +74,8 @@ def _load_helper():
     return mod
 
 
-def test_the_message_the_helper_builds(calib_file, monkeypatch, capsys):
-    """The helper turns the JSON into a CameraInfo and calls the service with it."""
-    called = []
+def _fake_ros(monkeypatch, called: list, *, success: bool = True, status: str = "written") -> None:
+    """Stand-ins for ``rospy`` and ``sensor_msgs`` whose service answers ``success``/``status``."""
 
     class CameraInfo:  # sensor_msgs.msg.CameraInfo's fields
         def __init__(self):
@@ -88,7 +87,7 @@ def test_the_message_the_helper_builds(calib_file, monkeypatch, capsys):
     def service_proxy(name, srv):
         def call(info):
             called.append((name, info))
-            return types.SimpleNamespace(success=True, status_message="written")
+            return types.SimpleNamespace(success=success, status_message=status)
         return call
 
     rospy = types.ModuleType("rospy")
@@ -104,6 +103,12 @@ def test_the_message_the_helper_builds(calib_file, monkeypatch, capsys):
     for name, mod in (("rospy", rospy), ("sensor_msgs", pkg), ("sensor_msgs.msg", msg_mod),
                       ("sensor_msgs.srv", srv_mod)):
         monkeypatch.setitem(sys.modules, name, mod)
+
+
+def test_the_message_the_helper_builds(calib_file, monkeypatch, capsys):
+    """The helper turns the JSON into a CameraInfo and calls the service with it."""
+    called = []
+    _fake_ros(monkeypatch, called)
     helper = _load_helper()
     monkeypatch.setattr(helper, "master_problem", lambda: None)
     request = camera_info_dict(calib_files.load_intrinsics(calib_file), frame_id="bot1/camera_optical_frame")
@@ -129,3 +134,19 @@ def test_a_refusal_is_an_error_with_advice_and_the_file_kept(calib_file, monkeyp
         commit_intrinsics("bot1", calib_file, master_uri="http://127.0.0.1:9", timeout=2)
     assert f"the node said {kind}" in str(e.value) and advice in str(e.value) and "scp" in str(e.value)
     assert calib_file.read_bytes() == before
+
+
+def test_the_helper_reports_the_camera_nodes_refusal(calib_file, monkeypatch, capsys):
+    """ROS's sensor_msgs/SetCameraInfo.srv answers ``bool success  # True if the call succeeded`` and
+    ``string status_message``: a node that could not store the calibration says ``success: false``. The helper
+    process must pass that refusal on (with the node's words), not report ``ok``."""
+    called = []
+    _fake_ros(monkeypatch, called, success=False, status="cannot write /data/config/calibrations")
+    helper = _load_helper()
+    monkeypatch.setattr(helper, "master_problem", lambda: None)
+    request = camera_info_dict(calib_files.load_intrinsics(calib_file), frame_id="bot1/camera_optical_frame")
+    monkeypatch.setattr(sys, "stdin", io.StringIO(json.dumps(request)))
+    helper.set_camera_info("/bot1/camera_node/set_camera_info", 2.0)
+    said = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert len(called) == 1
+    assert said == {"ok": False, "kind": "refused", "message": "cannot write /data/config/calibrations"}

@@ -332,8 +332,14 @@ def test_synthetic_session_recording():
     assert visible > 15
     assert found >= 0.95 * visible, f"found {found} of {visible} fully visible boards"
     assert worst < 1.5, f"worst corner error {worst:.2f} px"
-    # the extrinsic recording: the board lies on the floor in front of the robot
-    ext = [detect_board(frame.image) for frame in BagSource(SESSION / "extrinsics.bag") if frame.image is not None]
+    # the extrinsic recording: the board lies on the floor in front of the robot, seen flat; the extrinsic
+    # procedure looks for it with the thorough detector (one still frame). With the printed pattern's colours
+    # (the near-right corner square white, meeting the white margin) the live detector's biggest saddle
+    # cluster on the raw frame holds 26 of the 28 saddles it needs, so only the thorough path finds it there.
+    from dtscal_lib.detect import detect_board_still
+
+    ext = [detect_board_still(frame.image) for frame in BagSource(SESSION / "extrinsics.bag")
+           if frame.image is not None]
     assert ext and all(d.found for d in ext)
 
 

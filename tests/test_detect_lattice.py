@@ -1,6 +1,6 @@
 """The saddle lattice: the board's corners straight from the saddle clusters, without the classic detector.
 
-``detect._saddle_lattice`` walks the saddles of a candidate cluster as a grid; where they form exactly the
+``detect.lattice._saddle_lattice`` walks the saddles of a candidate cluster as a grid; where they form exactly the
 board's ``rows x cols`` window with a weaker ring around it, the classic detector is not run. These tests pin
 what makes that safe, on OpenCV's real sample photographs (data/real, 9x6) and on rendered frames:
 
@@ -21,7 +21,10 @@ import numpy as np
 import pytest
 
 from dtscal_lib import detect as D
-from dtscal_lib.boards import Board, parse_board
+from dtscal_lib.detect.classic import _finish
+from dtscal_lib.detect.lattice import _saddle_lattice
+from dtscal_lib.detect.saddles import _Candidate, _candidates
+from dtscal_lib.boards import DUCKIETOWN_BOARD, Board, parse_board
 
 REAL = Path(__file__).resolve().parents[1] / "data" / "real" / "opencv-samples"
 BOARD = Board(cols=9, rows=6, square=0.03)
@@ -35,8 +38,8 @@ def photos() -> list[np.ndarray]:
 
 
 def _lattice(gray, board):
-    for cand in D._candidates(gray, board):
-        grid = D._saddle_lattice(cand, board)
+    for cand in _candidates(gray, board):
+        grid = _saddle_lattice(cand, board)
         if grid is not None:
             return grid
     return None
@@ -69,8 +72,8 @@ def test_lattice_start_refines_to_the_classic_start_corners(photos):
         ok, classic = cv2.findChessboardCorners(g, BOARD.pattern_size, flags=D.REGION_FLAGS)
         if grid is None or not ok:
             continue
-        a = D._finish(g, grid, BOARD, 8.0)
-        b = D._finish(g, classic.reshape(-1, 2).astype(np.float64), BOARD, 8.0)
+        a = _finish(g, grid, BOARD, 8.0)
+        b = _finish(g, classic.reshape(-1, 2).astype(np.float64), BOARD, 8.0)
         assert a.found and b.found
         diffs.append(np.linalg.norm(a.corners - b.corners, axis=1))
     d = np.concatenate(diffs)
@@ -90,16 +93,16 @@ def test_a_window_of_a_bigger_board_is_refused(photos, size):
 def test_lattice_gives_up_on_scattered_saddles():
     rng = np.random.default_rng(0)
     pts = rng.uniform(0, 400, size=(80, 2))
-    cand = D._Candidate((0, 0, 400, 400), pts, 30.0, rng.uniform(1, 2, size=80))
-    assert D._saddle_lattice(cand, BOARD) is None
+    cand = _Candidate((0, 0, 400, 400), pts, 30.0, rng.uniform(1, 2, size=80))
+    assert _saddle_lattice(cand, BOARD) is None
 
 
 def test_lattice_reads_a_perfect_grid_in_either_axis_order():
     j, i = np.mgrid[0:BOARD.rows, 0:BOARD.cols]
     grid = np.column_stack([100 + 30.0 * i.ravel(), 80 + 30.0 * j.ravel()])
     for pts in (grid, grid[:, ::-1].copy()):  # the transposed image: rows become columns
-        cand = D._Candidate((0, 0, 600, 600), pts, 30.0, np.ones(len(pts)))
-        out = D._saddle_lattice(cand, BOARD if pts is grid else Board(cols=6, rows=9, square=0.03))
+        cand = _Candidate((0, 0, 600, 600), pts, 30.0, np.ones(len(pts)))
+        out = _saddle_lattice(cand, BOARD if pts is grid else Board(cols=6, rows=9, square=0.03))
         assert out is not None
         assert sorted(map(tuple, out)) == sorted(map(tuple, pts))
 
@@ -113,7 +116,7 @@ def test_recording_windows_of_the_wrong_size_are_refused():
     assert len(frames) >= 20
     right = 0
     for gray in frames:
-        right += _lattice(gray, D.DUCKIETOWN_BOARD) is not None
+        right += _lattice(gray, DUCKIETOWN_BOARD) is not None
         for size in ("6x4", "5x5", "6x5", "7x4", "5x4"):
             assert _lattice(gray, parse_board(size)) is None, size
     assert right >= 0.8 * sum(D.detect_board(g).found for g in frames)

@@ -76,10 +76,10 @@ MISBEHAVIOURS = {
                     "    return pts * 0\n", "off by"),
     # (names built at run time, so that the academic-honesty rule does not see them first)
     "patch_opencv": ("    cv = __import__('c' + 'v2')\n    setattr(cv, 'perspective' + 'Transform', lambda p, H: p)\n"
-                     "    return pts * 1.0\n", "off by"),
+                     "    return pts * 1.0\n", "cv2 is not allowed in this exercise"),
     "patch_grader": ("    import importlib\n    c = importlib.import_module('dtscal_lib.grading' + '.checks')\n"
                      "    setattr(c, 'judge_' + 'close', lambda *a: (1.0, ''))\n"
-                     "    setattr(c, '_com' + 'pare', lambda *a: '')\n    return pts * 0\n", "off by"),
+                     "    setattr(c, '_com' + 'pare', lambda *a: '')\n    return pts * 0\n", "academic honesty"),
     "eq_always_true": ("    class Liar:\n        def __eq__(self, other):\n            return True\n"
                        "        __ne__ = lambda self, other: False\n    return Liar()\n", "Liar"),
     "ndarray_subclass": ("    class Same(np.ndarray):\n        def __eq__(self, other):\n"
@@ -91,13 +91,15 @@ MISBEHAVIOURS = {
     "array_liar": ("    class Fake:\n        def __array__(self, dtype=None, copy=None):\n"
                    "            return np.zeros((3, 2))\n        def __len__(self):\n            return 3\n"
                    "    return Fake()\n", "Fake"),
+    # the material is absent from the sandbox's files; sockets and new processes are refused (seccomp)
     "read_material": (f"    text = open({str(GRADING_CASES)!r}).read()\n    print(text)\n    return pts * 0\n",
-                      "not readable"),
-    "list_material": (f"    print(os.listdir({str(GRADING_CASES.parent)!r}))\n    return pts * 0\n", "not readable"),
+                      "No such file"),
+    "list_material": (f"    print(os.listdir({str(GRADING_CASES.parent)!r}))\n    return pts * 0\n", "No such file"),
     "write_material": (f"    open({str(GRADING_CASES)!r}, 'a').write('# pwned')\n    return pts * 0\n",
-                       "not readable"),
-    "network": ("    import socket\n    s = socket.socket()\n    s.connect(('127.0.0.1', 9))\n", "does not allow"),
-    "subprocess": ("    import subprocess\n    subprocess.run(['true'])\n", "does not allow"),
+                       ("No such file", "Read-only file system")),
+    "network": ("    import socket\n    s = socket.socket()\n    s.connect(('127.0.0.1', 9))\n",
+                "Operation not permitted"),
+    "subprocess": ("    import subprocess\n    subprocess.run(['true'])\n", "Operation not permitted"),
 }
 
 

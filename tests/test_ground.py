@@ -60,7 +60,8 @@ def render_board_frame(camera: CameraModel, H: np.ndarray, board: Board = DUCKIE
 
     The kit's ray caster (:class:`dtscal_lib.synth.Renderer`, 2x2 sub-pixels) meets the ground
     with every sub-pixel's ray: rectified pixel ``Kp [x, y, 1]`` -> ground ``H Kp [x, y, 1]``.
-    The floor is grey (120), the paper white (235), the board's squares black (20), what lies
+    The floor is grey (120), the paper white (235), the board's dark squares black (20; the corner square
+    nearest the robot on its right is white, as on Duckietown's printed A3 pattern, duckietown.md), what lies
     above the horizon 90; the sub-pixels are area-averaged to pixels.
     """
     key = id(camera)
@@ -83,7 +84,7 @@ def render_board_frame(camera: CameraModel, H: np.ndarray, board: Board = DUCKIE
              & (Y > y_lo - m) & (Y < y_lo + (board.cols + 1) * s + m))
     grey = np.full(X.shape, 120.0, np.float32)
     grey[paper] = 235.0
-    grey[on_board & ((i + j) % 2 == 0)] = 20.0
+    grey[on_board & ((i + j) % 2 == 1)] = 20.0  # Duckietown's print: the near-right corner square white
     grey[~front] = 90.0
     grey = np.rint(caster.downsample(grey)).astype(np.uint8)
     assert grey.shape == (h, w)
@@ -255,8 +256,10 @@ def test_calibrate_extrinsics_no_board(camera):
 
 
 def test_calibrate_extrinsics_board_at_border(camera):
-    # robot turned 29 degrees: the board's left end reaches the rectified image's right edge
-    frame = render_board_frame(camera, pose_homography(camera.rectified_K, 0.10, 20, 29))
+    # robot turned 25 degrees: the board's left end reaches the rectified image's right edge (with the printed
+    # pattern's colours the left end's outer squares are black-white from near to far; turned 29 degrees, the
+    # edge cuts the black one and OpenCV's detector no longer sees the board at all)
+    frame = render_board_frame(camera, pose_homography(camera.rectified_K, 0.10, 20, 25))
     with pytest.raises(CalibrationError, match="within 8 px of the rectified image's edge"):
         extrinsics_from_image(frame, camera)
 
@@ -283,16 +286,17 @@ def test_birdseye_view_geometry(camera, default_frame):
         return grey[int((0.40 - x) * ppm), int((0.15 - y) * ppm)]
 
     s = DUCKIETOWN_BOARD.square
-    # squares of the board: centre of the near-right square is dark, its left neighbour light
+    # squares of the board (Duckietown's printed A3 pattern, duckietown.md): the corner square nearest the
+    # robot on its right is white, its left neighbour dark
     x_sq = GROUND_NEAR_ROW_X - s / 2
     y_right = -0.093 - s / 2
-    assert at(x_sq, y_right) < 80
-    assert at(x_sq, y_right + s) > 180
-    assert at(x_sq + s, y_right + s) < 80
-    # not mirrored: the near-left square is light, the far-left dark, the far-right light
-    assert at(x_sq, 0.093 + s / 2) > 180
-    assert at(x_sq + 5 * s, 0.093 + s / 2) < 80
-    assert at(x_sq + 5 * s, y_right) > 180
+    assert at(x_sq, y_right) > 180
+    assert at(x_sq, y_right + s) < 80
+    assert at(x_sq + s, y_right + s) > 180
+    # not mirrored: the near-left square is black, the far-left white, the far-right black
+    assert at(x_sq, 0.093 + s / 2) < 80
+    assert at(x_sq + 5 * s, 0.093 + s / 2) > 180
+    assert at(x_sq + 5 * s, y_right) < 80
     # beyond the paper: the grey floor
     assert 100 < at(0.39, 0.0) < 140
 

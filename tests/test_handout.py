@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 import re
@@ -30,7 +31,8 @@ def test_handout_has_no_solution_line_and_no_grading_material(handout):
     assert not [p for p in handout.rglob("*") if "grading" in p.relative_to(handout).parts]
     assert not (handout / "solutions").exists() and not (handout / "tests").exists()
     assert not (handout / "benchmarks").exists()
-    assert sorted(p.name for p in (handout / "scripts").iterdir()) == ["install-ros.sh"]  # notebook 06 names it
+    # notebook 06 names install-ros.sh; it sources apt-wait.sh; nothing else of the kit's scripts
+    assert sorted(p.name for p in (handout / "scripts").iterdir()) == ["apt-wait.sh", "install-ros.sh"]
     assert (handout / "start.sh").is_file() and (handout / "README.md").read_text() == rel.STUDENT_README
     assert (handout / "data" / "session").is_dir() and (handout / "notebooks" / "01_pinhole_projection.ipynb").exists()
 
@@ -77,13 +79,26 @@ def test_handout_readme_names_only_files_the_handout_has(handout):
 
 
 def test_handout_is_a_git_repository_that_carries_the_workspace(handout, tmp_path):
-    """A GitHub Classroom push carries the student's workspace whole; backups, .venv and hand-in zips stay out."""
+    """The README's claim: the hand-out is a git repository (one commit of everything, by nobody's name), and the
+    student's workspace is part of it; backups, .venv and hand-in zips stay out."""
     import shutil
 
     repo = tmp_path / "repo"
-    # the hand-out as handed out: what another test's start of it made there (.venv, workspace/, hand-ins) left out
-    shutil.copytree(handout, repo, ignore=lambda d, names: [n for n in names if Path(d) == handout
-                                                            and n in (".venv", "workspace", "handin")])
+    # the hand-out as handed out: what another test's start of it made there (.venv, the editable install's
+    # egg-info, workspace/, hand-ins) left out
+    shutil.copytree(handout, repo, ignore=lambda d, names: [n for n in names if Path(d) == handout and (
+        n in (".venv", "workspace", "handin") or n.endswith(".egg-info"))])
+    git = ["git", "-c", f"safe.directory={repo}"]
+    log = subprocess.run([*git, "log", "--format=%an <%ae>|%s"], cwd=repo, capture_output=True, text=True)
+    assert log.returncode == 0, log.stderr  # a repository, with a history
+    assert log.stdout.splitlines() == ["dtscal hand-out <handout@dtscal.invalid>|the course as handed out"]
+    assert subprocess.run([*git, "status", "--porcelain"], cwd=repo, capture_output=True, text=True,
+                          check=True).stdout == ""  # everything handed out is committed
+    committed = set(subprocess.run([*git, "ls-files"], cwd=repo, capture_output=True, text=True,
+                                   check=True).stdout.split())
+    on_disk = {p.relative_to(repo).as_posix() for p in repo.rglob("*") if p.is_file() and ".git" not in
+               p.relative_to(repo).parts}
+    assert committed == on_disk
     ws = repo / "workspace"
     (ws / ".course").mkdir(parents=True)
     (ws / "backups" / "20250101-120000").mkdir(parents=True)
@@ -94,21 +109,116 @@ def test_handout_is_a_git_repository_that_carries_the_workspace(handout, tmp_pat
     (repo / "handin" / "ada.zip").write_bytes(b"PK")
     (repo / ".venv").mkdir()
     (repo / ".venv" / "x").write_text("x")
-    git = ["git", "-c", "user.name=t", "-c", "user.email=t@example.org", "-c", "init.defaultBranch=main"]
-    subprocess.run([*git, "init", "-q"], cwd=repo, check=True)
+    (ws / ".update.lock").write_text("")
     subprocess.run([*git, "add", "-A"], cwd=repo, check=True)
-    tracked = set(subprocess.run(["git", "ls-files"], cwd=repo, capture_output=True, text=True,
+    tracked = set(subprocess.run([*git, "ls-files"], cwd=repo, capture_output=True, text=True,
                                  check=True).stdout.split())
     assert {"workspace/01_pinhole_projection.ipynb", "workspace/.course/01_pinhole_projection.ipynb",
-            "start.sh", "scripts/install-ros.sh", "docs/ta.md", ".gitignore"} <= tracked
-    assert not [t for t in tracked if t.startswith(("workspace/backups/", ".venv/", "handin/"))]
+            "start.sh", "scripts/install-ros.sh", "scripts/apt-wait.sh", "docs/ta.md", ".gitignore"} <= tracked
+    assert not [t for t in tracked if t.startswith(("workspace/backups/", ".venv/", "handin/", "workspace/.update"))]
+
+
+#: what the hand-out's texts may name that is not a file in it: Duckietown's robot-side folder (the robot keeps
+#: its calibrations in /data/config/calibrations/, Duckietown's docs)
+NOT_IN_HANDOUT = ("data/config/",)
+#: the TA page ships in the hand-out but speaks to TAs and instructors, who hold the kit: a file it names is in
+#: the hand-out or in the kit (its tests and benchmarks cite where a figure was measured, its set-up scripts)
+KIT_SIDE = ("docs/ta.md",)
+_PATH = re.compile(r"(?<![\w/.$-])((?:scripts|docs|data|notebooks|dtscal_lib)/[\w./*-]*[\w*/])")
+_SOURCES = re.compile(r"""^\s*(?:source|\.)\s+["']?\$\(dirname\s+["']?\$0["']?\)/([^"'\s]+)""", re.M)
+_README_SECTION = re.compile(r"README'?s? section \*([^*]+)\*")
+_NUMBERED_SECTION = re.compile(r"\bsection (\d+)\b")
+
+
+def _texts(handout: Path) -> dict[str, str]:
+    texts = {"README.md": (handout / "README.md").read_text(), "start.sh": (handout / "start.sh").read_text()}
+    for p in sorted((handout / "scripts").glob("*.sh")) + sorted((handout / "docs").glob("*.md")):
+        texts[p.relative_to(handout).as_posix()] = p.read_text()
+    for p in sorted((handout / "notebooks").glob("*.ipynb")):
+        nb = json.loads(p.read_text())
+        texts[f"notebooks/{p.name}"] = "\n".join("".join(c["source"]) for c in nb["cells"])
+    return texts
+
+
+def test_every_file_script_and_section_the_handout_names_is_in_it(handout):
+    """Issue 23: the hand-out alone. Every script a shipped script sources, every file or folder the README,
+    start.sh, the scripts, docs/ and the notebooks name, and every README section a notebook points to, is in
+    the hand-out (a path parsed from the text, looked up on disk: independent of how release.py chose them)."""
+    texts = _texts(handout)
+    assert any(name.startswith("notebooks/06") for name in texts) and "scripts/install-ros.sh" in texts
+    missing = []
+    for name, text in texts.items():
+        for sourced in _SOURCES.findall(text) if name.endswith(".sh") else []:
+            if not (handout / name).parent.joinpath(sourced).is_file():
+                missing.append(f"{name} sources {sourced}")
+        for path in _PATH.findall(text):
+            if path.startswith(NOT_IN_HANDOUT):
+                continue
+            where = (handout, ROOT) if name in KIT_SIDE else (handout,)
+            if not any(list(base.glob(path.rstrip("/"))) for base in where):
+                missing.append(f"{name} names {path}")
+    assert _SOURCES.findall(texts["scripts/install-ros.sh"]) == ["apt-wait.sh"]  # the parse sees the real case
+    headings = [line.lstrip("#").strip() for line in texts["README.md"].splitlines() if line.startswith("#")]
+    named_sections = [(n, s) for n, t in texts.items() for s in _README_SECTION.findall(t)]
+    assert ("notebooks/06_duckiebot_camera.ipynb", "With a real Duckiebot") in named_sections
+    for name, section in named_sections:
+        if section not in headings:
+            missing.append(f"{name} names the README's section *{section}*; the README's sections: {headings}")
+    ta_headings = [line for line in texts["docs/ta.md"].splitlines() if line.startswith("#")]
+    for number in _NUMBERED_SECTION.findall(texts["docs/ta.md"]):
+        if not any(h.startswith(f"## {number}.") for h in ta_headings):
+            missing.append(f"docs/ta.md names its section {number}, which it does not have")
+    assert missing == []
+
+
+def test_a_shipped_script_without_what_it_sources_is_found(handout, tmp_path):
+    """The check above can fail: the hand-out of before issue 23 (install-ros.sh without apt-wait.sh) is caught."""
+    import shutil
+
+    old = tmp_path / "old"
+    shutil.copytree(handout / "scripts", old / "scripts")
+    (old / "scripts" / "apt-wait.sh").unlink()
+    bin_dir = tmp_path / "bin"  # a computer without ROS: no roscore on PATH
+    bin_dir.mkdir()
+    for tool in ("bash", "dirname"):
+        (bin_dir / tool).symlink_to(shutil.which(tool))
+    res = subprocess.run([str(bin_dir / "bash"), str(old / "scripts" / "install-ros.sh")], capture_output=True,
+                         text=True, env={"PATH": str(bin_dir), "HOME": str(tmp_path)}, timeout=60)
+    assert res.returncode != 0 and "apt-wait.sh" in res.stderr  # what the student saw: No such file
+    sourced = _SOURCES.findall((old / "scripts" / "install-ros.sh").read_text())
+    assert [s for s in sourced if not (old / "scripts" / s).is_file()] == ["apt-wait.sh"]
 
 
 def test_start_sh_shows_progress_and_hands_in():
-    """The first start prints a line per step and lets pip show each package; --handin runs `dtscal handin`."""
+    """The first start prints a line per step and lets the installer show each package (uv, else pip, never
+    quiet); --handin runs `dtscal handin`; --setup-only stops before JupyterLab."""
     text = rel.START_SH
     assert "[1/3]" in text and "[2/3]" in text and "[3/3]" in text
-    install = next(line for line in text.splitlines() if "pip install" in line and "-e ." in line)
-    assert "--quiet" not in install and "--progress-bar on" in install
+    installs = [line for line in text.splitlines() if "install" in line and "-e ." in line]
+    assert len(installs) == 2 and any("uv" in line for line in installs) and any("pip" in line for line in installs)
+    assert not [line for line in text.splitlines() if "install" in line and ("--quiet" in line or " -q" in line)]
     assert 'exec .venv/bin/dtscal handin "$@"' in text
+    assert '"--setup-only"' in text and '"--no-open"' in text
     assert subprocess.run(["bash", "-n"], input=text, text=True).returncode == 0
+
+
+def test_start_sh_gives_uv_the_settings_pip_has(tmp_path):
+    """uv does not read pip's configuration; start.sh hands pip's settings to uv, so that both install from the same
+    places: uv's documented variables (docs.astral.sh/uv, "Environment variables") for pip's options, and pip's rule
+    of taking the best version over every index (UV_INDEX_STRATEGY=unsafe-best-match)."""
+    code = rel.START_SH.split("<<'PY'\n", 1)[1].split("\nPY\n", 1)[0]  # the settings reader start.sh runs
+    env = {"PATH": os.environ["PATH"], "HOME": str(tmp_path), "PIP_CONFIG_FILE": os.devnull,
+           "PIP_INDEX_URL": "https://mirror.example/simple",
+           "PIP_EXTRA_INDEX_URL": "https://a.example/simple https://b.example/simple",
+           "PIP_FIND_LINKS": "/wheels/one /wheels/two", "PIP_CONSTRAINT": "/etc/course-constraints.txt",
+           "PIP_TRUSTED_HOST": "mirror.example", "PIP_DEFAULT_TIMEOUT": "90"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    exports = dict(line.removeprefix("export ").split("=", 1) for line in out.splitlines())
+    assert exports == {"UV_INDEX_URL": "https://mirror.example/simple",
+                       "UV_EXTRA_INDEX_URL": "'https://a.example/simple https://b.example/simple'",
+                       "UV_FIND_LINKS": "/wheels/one,/wheels/two", "UV_CONSTRAINT": "/etc/course-constraints.txt",
+                       "UV_INSECURE_HOST": "mirror.example", "UV_HTTP_TIMEOUT": "90",
+                       "UV_INDEX_STRATEGY": "unsafe-best-match"}
+    env = {k: v for k, v in env.items() if not k.startswith("PIP_") or k == "PIP_CONFIG_FILE"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.splitlines() == ["export UV_INDEX_STRATEGY=unsafe-best-match"]  # no setting: uv's defaults (PyPI)

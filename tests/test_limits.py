@@ -56,3 +56,10 @@ def test_the_verdict_reads_its_thresholds_from_the_table():
         assert getattr(quality, name.upper()) == limits.LIMITS[name].value, name
     assert quality.FIT_RATIO_DOUBTFUL < quality.FIT_RATIO_BAD
     assert quality.CORNER_SIGMA_DOUBTFUL < quality.CORNER_SIGMA_BAD
+
+
+def test_no_limit_cites_a_kit_test_as_its_source():
+    """A kit test is a check, never a source (issue 21): each row's data names Duckietown's or ROS's code and
+    documents, real files, real photographs or a paper, and no row's source points into tests/."""
+    for lim in limits.TABLE:
+        assert "tests/" not in lim.source and "test_" not in lim.source, (lim.name, lim.source)

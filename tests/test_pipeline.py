@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -98,6 +99,17 @@ def test_cli_json_is_one_object_on_stdout(tmp_path):
     assert p.returncode == 0, p.stderr
     data = json.loads(p.stdout)
     assert len(data["homography"]) == 9
+    # the frame counts agree with the source: the bag's images, counted here with rosbags (not the kit's reader)
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([Path(EXTRINSIC_BAG)]) as bag:
+        n = sum(c.msgcount for c in bag.connections if c.msgtype.endswith("CompressedImage"))
+    fr = data["frames"]
+    assert n > 1 and f"{n} frames" in data["source"]  # what the source line says ...
+    assert fr["in_source"] == n and fr["total"] + fr["not_read"] == n  # ... the counts add up to
+    assert fr["used"] == 1 and fr["total"] == fr["used"] + sum(fr["rejected"].values())
+    text = _dtscal("calibrate-extrinsics", "--source", EXTRINSIC_BAG, "--intrinsics", out, "--no-write", "-q")
+    assert f"frames: {fr['total']} read of {n}" in text.stdout and f"{fr['not_read']} not read" in text.stdout
     x, y = data["image_center_ground_m"]
     assert 0.2 < x < 1.0 and abs(y) < 0.1
     assert (tmp_path / "camera_extrinsic" / "synthbot.yaml").exists()

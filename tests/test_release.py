@@ -206,9 +206,11 @@ def _toy_repo(tmp_path: Path, library_text: str = "VALUE = 1\n") -> Path:
 def test_release_layout_on_a_toy_kit(tmp_path):
     root = _toy_repo(tmp_path)
     out = rel.release(tmp_path / "student", repo_root=root)
-    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.relative_to(out).parts[0]
+                   != ".git")
     assert files == [rel.RELEASE_MARKER, ".gitignore", "README.md", "data/truth.yaml", "dtscal_lib/__init__.py",
                      "notebooks/01_toy.ipynb", "pyproject.toml", "start.sh"]
+    assert (out / ".git").is_dir()  # a git repository (test_handout.py checks its commit)
     assert (out / "README.md").read_text() == rel.STUDENT_README and "bash start.sh" in rel.STUDENT_README
     assert "2 * x" not in (out / "notebooks" / "01_toy.ipynb").read_text()
 

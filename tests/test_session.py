@@ -155,11 +155,13 @@ def test_one_robot_name_rule():
 #: the layers of a calibration's walk: drivers call the session, the session calls the areas below
 DRIVERS = {"cli", "pipeline", "ui.intrinsic", "ui.intrinsic_driver", "ui.extrinsic", "ui.extrinsic_driver",
            "ui.background", "ui.frameloop", "ui.render", "ui.archive"}
-AREAS = {"detect": {"detect", "coverage", "boards"}, "calibration": {"calibration", "camera", "ui.solver"},
+DETECT = {"detect", "detect.classic", "detect.frame", "detect.grid", "detect.lattice", "detect.order", "detect.refine",
+          "detect.saddles"}
+AREAS = {"detect": DETECT | {"coverage", "boards"}, "calibration": {"calibration", "camera", "ui.solver"},
          "judge": {"plausibility", "quality", "ground", "report"}, "files": {"calib_files", "safe_yaml"},
          "robot": {"robot"}}
 #: the steps of a calibration: only the session calls them
-STEPS = {("detect", "detect_board"), ("calibration", "calibrate"), ("plausibility", "intrinsic_doubts"),
+STEPS = {("detect.classic", "detect_board"), ("calibration", "calibrate"), ("plausibility", "intrinsic_doubts"),
          ("quality", "assess"), ("calib_files", "save_intrinsics"), ("robot", "commit_intrinsics")}
 
 
@@ -271,7 +273,7 @@ def check_walk(walk: Walk, areas: list[str], steps: list[tuple[str, str]]) -> No
 
 
 #: the steps of every walk, and of a walk that ends on the robot
-FOLDER_STEPS = [("detect", "detect_board"), ("calibration", "calibrate"), ("plausibility", "intrinsic_doubts"),
+FOLDER_STEPS = [("detect.classic", "detect_board"), ("calibration", "calibrate"), ("plausibility", "intrinsic_doubts"),
                 ("calib_files", "save_intrinsics")]
 ROBOT_STEPS = FOLDER_STEPS + [("robot", "commit_intrinsics")]
 

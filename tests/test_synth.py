@@ -28,8 +28,8 @@ def truth():
     return datasets.load_truth()
 
 
-def detect(gray: np.ndarray, radius: int = 5) -> np.ndarray | None:
-    ok, c = cv2.findChessboardCorners(gray, BOARD.pattern_size, flags=ROS_FLAGS)
+def detect(gray: np.ndarray, radius: int = 5, flags: int = ROS_FLAGS) -> np.ndarray | None:
+    ok, c = cv2.findChessboardCorners(gray, BOARD.pattern_size, flags=flags)
     if not ok:
         return None
     c = cv2.cornerSubPix(gray, c, (radius, radius), (-1, -1),
@@ -178,7 +178,11 @@ def test_stored_extrinsic_frame_gives_the_true_ground_points(truth):
     P = truth["extrinsics"]["homography_P"]
     mx, my = cv2.initUndistortRectifyMap(cam["K"], cam["dist"], np.eye(3), P[:, :3], (640, 480), cv2.CV_32FC1)
     rect = cv2.remap(img, mx, my, cv2.INTER_LINEAR)
-    found = detect(cv2.cvtColor(rect, cv2.COLOR_BGR2GRAY), radius=4)
+    # Duckietown's extrinsic detection runs without FAST_CHECK (ADAPTIVE_THRESH | NORMALIZE_IMAGE): on the printed
+    # pattern the near-right corner square is white and meets the white margin, and FAST_CHECK's quick test
+    # misses such a board seen this flat in 2 of the 5 frames
+    found = detect(cv2.cvtColor(rect, cv2.COLOR_BGR2GRAY), radius=4,
+                   flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
     assert found is not None, "the board on the ground was not found in the rectified extrinsic frame"
     pts = order_for_ground(found, BOARD)
     H = truth["extrinsics"]["homography"]

@@ -12,6 +12,7 @@ import socket
 import time
 import zipfile
 
+import cv2
 import numpy as np
 import pytest
 
@@ -273,3 +274,66 @@ def test_odd_frames_are_counted_not_raised(filled):
     filled.loop.step(Frame(10_001, 0.0, np.zeros((240, 320, 3), np.uint8), None, "small"))
     assert filled.bad["odd_frame"] == 1 and filled.bad["size_mismatch"] == 1
     assert filled.frames_seen == n and not filled.loop.errors
+
+
+def test_calibrate_stays_disabled_while_a_calibration_runs(filled, monkeypatch):
+    """ROS's cameracalibrator greys CALIBRATE out while it computes; here too: frames that arrive during a
+    calibration (each one ready by ROS's rule) never enable it, and it comes back when the calibration ends."""
+    import threading
+
+    started, release = threading.Event(), threading.Event()
+    real = filled.session.calibrate
+
+    def held(*a, **k):
+        started.set()
+        assert release.wait(120), "the test never let the calibration finish"
+        return real(*a, **k)
+
+    monkeypatch.setattr(filled.session, "calibrate", held)
+    monkeypatch.setattr(filled.background, "prepare", lambda wait=0.0: False)  # solve in this process
+    assert not filled.calibrate_button.disabled
+    filled.calibrate_button.click()
+    try:
+        assert started.wait(60) and filled.calibrating
+        assert filled.calibrate_button.disabled
+        frames = [f for _, f in zip(range(400), open_source(BAG)) if f.ok][-5:]
+        for f in frames:
+            filled.loop.step(f)
+            assert filled.calibrate_button.disabled, "CALIBRATE enabled while a calibration runs"
+    finally:
+        release.set()
+    assert wait_for(lambda: not filled.calibrating, 120)
+    assert wait_for(lambda: not filled.calibrate_button.disabled, 30)  # enabled again once it is done
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int]:
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None, "not a JPEG a browser can show"
+    return img.shape[1], img.shape[0]
+
+
+def test_views_show_a_placeholder_until_frames_flow_and_an_unreachable_source_could_not_connect():
+    """An empty ipywidgets Image is a broken-image icon in the browser: each view holds a picture from the start
+    (the undistorted preview until CALIBRATE, the live image until the first frame); a source that failed before
+    its first frame reads "could not connect: <reason>", never "source lost", and says so where the image was."""
+    from dtscal_lib.sources.live import LiveStatus
+
+    app = LiveCalibrator(str(BAG), autostart=False)
+    try:
+        for view in (app.image, app.preview):
+            assert view.value[:2] == b"\xff\xd8" and _jpeg_size(view.value) == (640, 480)
+        assert app.preview.value != app.image.value  # each says what it waits for
+        before = app.image.value
+        app._on_status(LiveStatus("error", "nothing listens on port 9 of 127.0.0.1; start the robot", 0))
+        assert "could not connect to" in app.status.value and "nothing listens on port 9" in app.status.value
+        assert "source lost" not in app.status.value
+        assert app.image.value[:2] == b"\xff\xd8" and app.image.value != before
+        # once frames came, losing the source is "source lost" (the samples are kept)
+        f = next(f for f in open_source(BAG) if f.ok)
+        app.loop.step(f)
+        shown = app.image.value
+        app._on_status(LiveStatus("error", "the ROS master stopped answering", 12))
+        assert "source lost" in app.status.value and "could not connect" not in app.status.value
+        assert app.image.value == shown  # the last frame stays on screen
+    finally:
+        app.close()

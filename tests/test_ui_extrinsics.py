@@ -122,3 +122,18 @@ def test_rectification_maps_made_once_by_opencv_give_the_same_fit(camera):
     frame = next(f for f in open_source(BAG) if f.ok)
     np.testing.assert_allclose(ground.extrinsics_from_image(frame.image, fast).H,
                                ground.extrinsics_from_image(frame.image, camera).H, rtol=1e-6, atol=1e-9)
+
+
+def test_views_show_a_placeholder_until_the_first_fit(camera, tmp_path):
+    """No empty image (a broken-image icon in the browser): every view holds a picture that says what comes there."""
+    import cv2
+
+    tool = LiveExtrinsics(str(BAG), intrinsics=camera, calibration_dir=tmp_path, autostart=False)
+    try:
+        views = (tool.image, tool.top, tool.grid, tool.birdseye)
+        for view in views:
+            img = cv2.imdecode(np.frombuffer(view.value, np.uint8), cv2.IMREAD_COLOR)
+            assert img is not None and img.shape[0] > 100
+        assert len({v.value for v in views}) == 4
+    finally:
+        tool.close()

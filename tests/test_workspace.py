@@ -301,7 +301,7 @@ def _cli_update(root: Path) -> tuple[int, str]:
     err = io.StringIO()
     with mock.patch("dtscal_lib.paths.repo_root", return_value=root), contextlib.redirect_stderr(err), \
             contextlib.redirect_stdout(io.StringIO()):
-        code = cli.main(["course", "--update"])
+        code = cli.main(["course", "--update", "--no-open"])
     return code, err.getvalue()
 
 
@@ -435,6 +435,106 @@ def test_update_on_a_full_disk_changes_nothing(tmp_path):
         _assert_nothing_lost(wsdir)
     finally:
         subprocess.run(["umount", "-l", str(mnt)])
+
+
+# --------------------------------------------------------------------------- issue 23: seams of the update journey
+def test_cells_the_student_put_above_the_first_course_cell_stay_on_top(tmp_path):
+    """A note written above the notebook's title (cell 0) is the student's and stays first, after an update."""
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    path = wsdir / "01_pinhole_projection.ipynb"
+    nb = nbformat.read(str(path), as_version=4)
+    title_id = nb.cells[0].get("id")
+    nb.cells.insert(0, nbformat.v4.new_markdown_cell("TOP: my own summary, above the title"))
+    nb.cells.insert(1, nbformat.v4.new_code_cell("top_scratch = 1"))
+    nbformat.write(nb, str(path))
+    _instructor_corrects(root)
+    report = ws.update_workspace(root, stamp="top")
+    assert report.own_cells["01_pinhole_projection.ipynb"] == 2, report.text()
+    after = nbformat.read(str(path), as_version=4)
+    assert [c.source for c in after.cells[:2]] == ["TOP: my own summary, above the title", "top_scratch = 1"]
+    assert after.cells[2].get("id") == title_id  # and the course's title right below them
+
+
+def test_a_course_cell_the_student_edited_and_the_new_course_removed_is_kept(tmp_path):
+    """The instructor deletes a markdown cell the student had written into: the student's text is kept."""
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    path = wsdir / "01_pinhole_projection.ipynb"
+    nb = nbformat.read(str(path), as_version=4)
+    victim = next(c for c in nb.cells if c.cell_type == "markdown" and c.get("id") != nb.cells[0].get("id")
+                  and "tags" not in c.metadata)
+    victim_id, mine = victim.get("id"), victim.source + "\n\nMY ANSWER: the focal length is in pixels."
+    victim.source = mine
+    nbformat.write(nb, str(path))
+    sol = root / "solutions" / "01_pinhole_projection.ipynb"
+    snb = nbformat.read(str(sol), as_version=4)
+    snb.cells = [c for c in snb.cells if c.get("id") != victim_id]  # the new course drops that cell
+    nbformat.write(snb, str(sol))
+    rel.generate_notebooks(root / "solutions", root / "notebooks")
+    assert victim_id not in {c.get("id") for c in nbformat.read(str(root / "notebooks" / path.name),
+                                                                 as_version=4).cells}
+    report = ws.update_workspace(root, stamp="rm")
+    assert not report.ok and "no longer has" in report.text()  # said, never silent
+    after = nbformat.read(str(path), as_version=4)
+    kept = [c for c in after.cells if ws.KEPT_TAG in c.metadata.get("tags", [])]
+    assert len(kept) == 1 and "MY ANSWER: the focal length is in pixels." in kept[0].source
+
+
+def test_an_update_leaves_no_lock_file_behind(tmp_path):
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _student_works(wsdir)
+    _instructor_corrects(root)
+    ws.update_workspace(root, stamp="l1")
+    assert not (wsdir / ws.LOCK).exists()
+    code, err = _cli_update(root)  # and through the command
+    assert code in (0, 1), err
+    assert not (wsdir / ws.LOCK).exists()
+
+
+def test_course_update_then_opens_the_course_with_the_options_given(tmp_path):
+    """`dtscal course --update --no-browser --port N` (what `start.sh --update ...` runs) merges, then starts
+    JupyterLab with those options; an update that fails opens nothing."""
+    import contextlib
+    import io
+    from unittest import mock
+
+    from dtscal_lib import cli
+
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    _write_student_code(wsdir / "01_pinhole_projection.ipynb", "project_points", STUDENT_CODE)
+    _instructor_corrects(root)
+    calls = []
+
+    def fake_exec(prog, argv):
+        calls.append((prog, list(argv)))
+        assert "Project world points (metres)" in _cell_of(wsdir / "01_pinhole_projection.ipynb", "project_points")
+        raise SystemExit(0)  # in place of JupyterLab
+
+    with mock.patch("dtscal_lib.paths.repo_root", return_value=root), \
+            mock.patch("dtscal_lib.datasets.session_dir", return_value=tmp_path), \
+            mock.patch("os.execv", fake_exec), contextlib.redirect_stdout(io.StringIO()) as out, \
+            contextlib.redirect_stderr(io.StringIO()):
+        with pytest.raises(SystemExit):
+            cli.main(["course", "--update", "--no-browser", "--port", "8931"])
+    assert len(calls) == 1, out.getvalue()
+    argv = calls[0][1]
+    assert "--port=8931" in argv and "--no-browser" in argv and f"--ServerApp.root_dir={wsdir}" in argv
+    assert "\n".join(STUDENT_CODE) in _cell_of(wsdir / "01_pinhole_projection.ipynb", "project_points")
+    assert not (wsdir / ws.LOCK).exists()
+
+    shutil.rmtree(wsdir / "backups")
+    (wsdir / "backups").write_text("not a folder")  # the next update cannot back up: nothing opens
+    _instructor_corrects(root)
+    calls.clear()
+    with mock.patch("dtscal_lib.paths.repo_root", return_value=root), \
+            mock.patch("dtscal_lib.datasets.session_dir", return_value=tmp_path), \
+            mock.patch("os.execv", fake_exec), contextlib.redirect_stdout(io.StringIO()), \
+            contextlib.redirect_stderr(io.StringIO()):
+        code = cli.main(["course", "--update", "--no-browser", "--port", "8931"])
+    assert code != 0 and calls == []
 
 
 def test_update_across_the_split_of_notebook_03_keeps_the_students_code_and_adds_03b(tmp_path):

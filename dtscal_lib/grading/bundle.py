@@ -9,8 +9,10 @@ notebooks, ``.py`` files, and the zip ``dtscal handin`` wrote, read as it is wit
 
 The zip holds the kit's library, the hidden cases (``grading/``) and the solution notebooks
 (references). ``setup.sh`` installs the library into a virtual environment and makes
-``grading/`` and ``solutions/`` readable by root only; the sandbox runs student code as
-a fresh uid behind Landlock and namespaces (docs/grading-sandbox.md). ``run_autograder``
+``grading/`` and ``solutions/`` readable by root only, and installs bubblewrap: student code runs
+in a bubblewrap sandbox that holds neither, or, where Gradescope's container allows no user
+namespace, as a bare process whose barriers ``results.json`` lists (docs/grading-sandbox.md:
+Gradescope's own per-submission container keeps other students out either way). ``run_autograder``
 always writes a results file, even if grading fails.
 For a local test, ``DTSCAL_AUTOGRADER_ROOT`` replaces ``/autograder`` and ``DTSCAL_PYTHON``
 the virtual environment's Python.
@@ -37,7 +39,7 @@ AUTOGRADER="${DTSCAL_AUTOGRADER_ROOT:-/autograder}"
 export DEBIAN_FRONTEND=noninteractive
 echo "setup.sh: installing python3 with apt" >&2
 apt-get update -qq
-apt-get install -y -qq python3 python3-venv python3-pip >/dev/null
+apt-get install -y -qq python3 python3-venv python3-pip bubblewrap >/dev/null  # bubblewrap: the sandbox
 PY=""
 for candidate in python3.13 python3.12 python3.11 python3; do
   if command -v "$candidate" >/dev/null 2>&1 && \\

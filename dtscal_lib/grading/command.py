@@ -88,6 +88,11 @@ def _grade_roster(args, r, material) -> int:
     for student in r.students:  # also in the CSV and JSON, next to the student's grades
         for n in r.notes.get(student, []):
             print(f"{student}: {n}", file=sys.stderr)
+    from .sandbox import barriers
+
+    held = barriers()  # which barriers hold around each submission on this machine (also in results.json)
+    print(f"sandbox: {held['mode']}" + ("" if held["mode"] == "bubblewrap" else f" -- {held['filesystem']}"),
+          file=sys.stderr)
     results = grade_all(r.items, material, jobs=args.jobs, progress=not args.quiet,
                         wall_s=args.wall, cpu_s=args.cpu, mem_mb=args.mem)
     by_student = {s: [] for s in r.students}
@@ -104,11 +109,11 @@ def _grade_roster(args, r, material) -> int:
     if args.json:
         if len(by_student) == 1:
             s = next(iter(by_student))
-            write_json(args.json, gradescope(by_student[s], r.notes.get(s, [])))
+            write_json(args.json, {**gradescope(by_student[s], r.notes.get(s, [])), "sandbox": held})
         else:
             write_json(args.json, {"students": {s: gradescope(rs, r.notes.get(s, []))
                                                 for s, rs in sorted(by_student.items())},
-                                   **({"not_graded": list(r.unplaced)} if r.unplaced else {})})
+                                   **({"not_graded": list(r.unplaced)} if r.unplaced else {}), "sandbox": held})
     if args.csv:
         write_csv(args.csv, by_student, r.notes)
     if args.report:

@@ -1,22 +1,50 @@
-"""The trusted side of the sandbox: start the child, enforce deadlines, read its answers.
+"""The trusted side of the sandbox: start bubblewrap per submission, read its answers, never trust it.
 
 :func:`run_calls` hands the submission's statements and the checks' inputs (never the
-expected answers) to :mod:`dtscal_lib.grading.child`, watches its control pipe, kills it
-when a deadline passes, starts it again without the statement or past the check that
-killed it, and reads the answers back as plain ``.npy`` arrays (``allow_pickle=False``):
-nothing the student's process writes can run code in the grader.
+expected answers), typed as :class:`CheckJob` / :class:`SandboxJob`, to
+:mod:`dtscal_lib.grading.harness`, which runs inside a bubblewrap sandbox
+(``bwrap``, Debian's ``bubblewrap``; :func:`bwrap_argv`) that holds only:
+
+* the interpreter and its standard library, numpy (and its ``numpy.libs``), the kit's allowed
+  modules (:data:`dtscal_lib.grading.loader.KIT_ALLOWED`) and the harness, all read-only;
+  ``/usr`` for the C libraries, with Debian's Python packages, ``/usr/local`` and every OpenCV
+  library covered; no ``/etc``, no home, no kit checkout, no ``.git``, no ``grading/``, no class
+  folder, no other submission, no host socket;
+* a private working tmpfs of :data:`TMPFS_MB` (the submission's only writable place), a fresh
+  ``/proc`` of its own PID namespace, a minimal ``/dev``, no network (``--unshare-net``), its own
+  user namespace with a uid per concurrent submission (:class:`_Slots`, shared by every grader
+  on the machine through lock files);
+* seccomp filters (:mod:`.seccomp`): the first loaded by bwrap itself.
+
+One sandbox per submission (all its checks in it, each in a fresh worker process forked from a
+trusted zygote that runs no student code): starting bwrap and Python costs tens of ms, once per
+submission instead of once per check (``benchmarks/bench_grade.py`` prints the cost), while each
+check still runs in its own process with its own limits.
+
+The answers come back as one length-prefixed frame per check over the harness's stdout, with
+hard caps on header size, number of arrays and bytes *before* anything is decoded; each array is
+a plain ``.npy`` read with ``allow_pickle=False``, each at most once. The sandbox writes no file
+the grader reads. Only values come back, never verdicts: the grader compares them with the truth
+it alone holds (:mod:`.checks`).
+
+Where bubblewrap cannot run (no user namespaces, as in some containers), the same harness runs
+as a bare process; :func:`barriers` says which barriers hold, for ``results.json`` and the
+command line. A sandbox that fails to start or dies on the grader's side is retried
+(:data:`RETRIES`); then :class:`GraderError` says "not graded: grader error, rerun".
 """
 
 from __future__ import annotations
 
 import atexit
+import fcntl
+import io
 import json
 import os
 import pickle
 import select
 import shutil
 import signal
-import socket
+import struct
 import subprocess
 import sys
 import tempfile
@@ -27,16 +55,25 @@ from pathlib import Path
 
 import numpy as np
 
-from .jobs import as_wire
+from . import seccomp
+from .errors import GRADER_ERROR, GraderError
+from .harness import ANSWER_MARK, MAX_ANSWER_BYTES, MAX_BLOBS, MAX_HEADER_BYTES, CheckJob, SandboxJob
 
-#: default limits, per check (wall-clock and CPU seconds) and per process (memory)
+__all__ = ["CheckJob", "SandboxJob", "Call", "CheckRun", "SandboxRun", "GraderError", "GRADER_ERROR", "run_calls",
+           "barriers"]
+
+#: default limits, per check (wall-clock and CPU seconds) and per submission (memory)
 WALL_S, CPU_S, MEM_MB, OUTPUT_CHARS = 10.0, 8, 2048, 2000
 #: bounds of the limits an instructor may set (``dtscal grade --wall/--cpu/--mem``):
 #: the reference solutions' slowest check takes well under 1 s, so 600 s per check is already
-#: generous; the preloaded grading process maps 444 MB of address space (VmPeak, numpy +
-#: OpenCV + the kit, measured) before a submission allocates anything: 1024 MB leaves room
+#: generous; a worker of the harness maps about 600 MB of address space (numpy's OpenBLAS
+#: reserves most of it) before a submission allocates anything: 1024 MB leaves room
 #: for the 640x480 float maps of notebook 04.
 MAX_WALL_S, MAX_CPU_S, MIN_MEM_MB = 600.0, 600, 1024
+#: the submission's working tmpfs: the notebooks' exercises write no file at all
+TMPFS_MB = 64
+#: a sandbox that fails on the grader's side is started again this many times
+RETRIES = 3
 
 
 def validate_limits(wall_s, cpu_s, mem_mb) -> None:
@@ -63,13 +100,12 @@ def validate_limits(wall_s, cpu_s, mem_mb) -> None:
                           f"grading process itself maps) and {total} (this machine's memory); default {MEM_MB}")
 
 
-#: barriers to leave out ("namespaces", "landlock"): only for tests of the fallbacks, which
-#: are what a machine without them gets
-WITHOUT: set[str] = set()
-
-#: time allowed for starting the child and loading the submission
+#: "bubblewrap" (default when bwrap runs here), "bare" (the harness without bubblewrap: what a
+#: machine without user namespaces gets; benchmarks compare the two)
+MODE: str | None = None
+#: time allowed for starting the sandbox and loading the submission
 LOAD_WALL_S = 30.0
-MAX_ARRAY_BYTES = 256 * 2 ** 20
+MAX_ARRAY_BYTES = MAX_ANSWER_BYTES
 
 
 @dataclass
@@ -84,7 +120,7 @@ class Call:
     args_after: list | None = None
     note: str = ""
     seconds: float = 0.0
-    #: solving routines (OpenCV's, the kit's) the call reached inside the sandbox
+    #: forbidden names (OpenCV's, the kit's solving modules) the call reached for
     honesty: list = field(default_factory=list)
 
 
@@ -114,35 +150,12 @@ def _describe(status: str, wall: float, cpu: int, mem_mb: int) -> str:
             return "stopped: the process was killed (out of memory or time)"
         if sig == signal.SIGSEGV:
             return "the process crashed (segmentation fault)"
-        return f"the process was ended by signal {signal.Signals(sig).name}"
+        try:
+            return f"the process was ended by signal {signal.Signals(sig).name}"
+        except ValueError:
+            return f"the process was ended by signal {sig}"
     code = status.split()[1] if " " in status else status
     return f"the function ended the process (os._exit / exit status {code}) before returning"
-
-
-def _decode(desc, out: Path):
-    if not isinstance(desc, dict):
-        return None, ""
-    kind = desc.get("kind")
-    if kind == "tuple":
-        items = [_decode(d, out)[0] for d in desc.get("items", [])[:4]]
-        return tuple(items), ""
-    if kind == "none":
-        return None, ""
-    if kind == "object":
-        return _Opaque(str(desc.get("type", "?"))[:60]), ""
-    if kind == "array":
-        path = (out / str(desc.get("file", ""))).resolve()
-        if path.parent != out.resolve() or not path.is_file() or path.is_symlink() \
-                or path.stat().st_size > MAX_ARRAY_BYTES:
-            return None, "unreadable answer"
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except Exception:
-            return None, "unreadable answer"
-        if type(arr) is not np.ndarray:
-            return None, "unreadable answer"
-        return arr, str(desc.get("note", ""))[:120]
-    return None, ""
 
 
 class _Opaque:
@@ -155,29 +168,96 @@ class _Opaque:
         return f"<a {self.type_name} object>"
 
 
-def _read_results(out: Path, check_id: int, nonce: str) -> list[Call] | None:
-    """The answers of one check, or None when absent, unreadable or not carrying ``nonce``
-    (the token the supervisor sent when the check started: nothing written before counts)."""
-    f = out / f"check_{check_id}.json"
-    if not f.is_file() or f.is_symlink() or f.stat().st_size > 10 * 2 ** 20:
-        return None
+# --------------------------------------------------------------------------- decoding (untrusted bytes)
+
+
+class _Unreadable(Exception):
+    pass
+
+
+def split_frame(data: bytes, offset: int = 0) -> tuple[dict, list[memoryview], int]:
+    """One frame of ``data`` at ``offset``: (header, blobs, end). Caps hold before decoding."""
+    view = memoryview(data)
+    if len(data) - offset < 4:
+        raise _Unreadable("short frame")
+    (n,) = struct.unpack_from(">I", data, offset)
+    if n > MAX_HEADER_BYTES or offset + 4 + n > len(data):
+        raise _Unreadable("header too large")
     try:
-        data = json.loads(f.read_text())
-    except Exception:
+        header = json.loads(bytes(view[offset + 4: offset + 4 + n]))
+    except ValueError:
+        raise _Unreadable("header not JSON") from None
+    sizes = header.get("blobs") if isinstance(header, dict) else None
+    if not isinstance(sizes, list) or len(sizes) > MAX_BLOBS or \
+            not all(isinstance(s, int) and s >= 0 for s in sizes) or sum(sizes) > MAX_ANSWER_BYTES:
+        raise _Unreadable("too many or too large arrays")
+    pos, blobs = offset + 4 + n, []
+    for s in sizes:
+        if pos + s > len(data):
+            raise _Unreadable("truncated")
+        blobs.append(view[pos: pos + s])
+        pos += s
+    return header, blobs, pos
+
+
+class _Decoder:
+    """Arrays of one answer frame: each blob decoded at most once (no fan-out of one array)."""
+
+    def __init__(self, blobs: list):
+        self.blobs, self.used = blobs, set()
+
+    def value(self, desc, depth: int = 0):
+        if not isinstance(desc, dict):
+            return None, ""
+        kind = desc.get("kind")
+        if kind == "tuple" and depth == 0:
+            items = desc.get("items")
+            return (tuple(self.value(d, 1)[0] for d in items[:4]) if isinstance(items, list) else None), ""
+        if kind == "object":
+            return _Opaque(str(desc.get("type", "?"))[:60]), ""
+        if kind == "array":
+            i = desc.get("blob")
+            if not isinstance(i, int) or not 0 <= i < len(self.blobs) or i in self.used:
+                return None, "unreadable answer"
+            self.used.add(i)
+            try:
+                arr = np.load(io.BytesIO(self.blobs[i]), allow_pickle=False)
+            except Exception:  # noqa: BLE001
+                return None, "unreadable answer"
+            if type(arr) is not np.ndarray or arr.dtype.kind not in "biuf":
+                return None, "unreadable answer"
+            return arr, str(desc.get("note", ""))[:120]
+        return None, ""
+
+
+def last_answer(data: bytes) -> bytes | None:
+    """The answer frame that closes a worker's output (length + mark at the very end), or None."""
+    if len(data) < 16 or data[-8:] != ANSWER_MARK:
         return None
-    if not isinstance(data, dict) or not nonce or data.get("nonce") != nonce:
+    (n,) = struct.unpack(">Q", data[-16:-8])
+    if n > len(data) - 16:
         return None
-    entries = data.get("calls")
-    if not isinstance(entries, list):
+    return data[len(data) - 16 - n: len(data) - 16]
+
+
+def decode_answers(data: bytes) -> list[Call] | None:
+    """The calls of one worker's answer frame, or None when it is not a well-formed frame."""
+    try:
+        header, blobs, end = split_frame(data)
+    except _Unreadable:
         return None
+    entries = header.get("calls")
+    if end != len(data) or not isinstance(entries, list) or len(entries) > 1000:
+        return None
+    dec = _Decoder(blobs)
     calls = []
-    for e in entries[:1000]:
+    for e in entries:
         if not isinstance(e, dict):
             return None
         c = Call(ok=bool(e.get("ok")), error=str(e.get("error", ""))[:400],
                  not_implemented=bool(e.get("not_implemented")), stdout=str(e.get("stdout", ""))[:4000])
         if c.ok:
-            c.value, c.note = _decode(e.get("value"), out)
+            c.value, c.note = dec.value(e.get("value"))
         try:
             c.seconds = float(e.get("time", 0.0))
         except (TypeError, ValueError):
@@ -187,9 +267,415 @@ def _read_results(out: Path, check_id: int, nonce: str) -> list[Call] | None:
             c.honesty = [str(h)[:80] for h in honesty[:10]]
         after = e.get("args_after")
         if isinstance(after, list):
-            c.args_after = [_decode(a, out)[0] if a else None for a in after]
+            c.args_after = [dec.value(a, 1)[0] if a else None for a in after[:16]]
         calls.append(c)
     return calls
+
+
+# --------------------------------------------------------------------------- what the sandbox holds
+
+
+def _kit_dir() -> Path:
+    return Path(__file__).resolve().parents[1]
+
+
+_LIB_LOCK = threading.Lock()
+_LIB: dict = {}
+
+
+def sandbox_lib() -> Path:
+    """A folder (0755, this grader's own) with the harness, the seccomp module and the kit's
+    allowed modules: the only files of the kit the sandbox sees. Made once per grader process."""
+    from .loader import KIT_ALLOWED
+
+    with _LIB_LOCK:
+        if "dir" in _LIB:
+            return _LIB["dir"]
+        d = Path(tempfile.mkdtemp(prefix="dtscal-sandbox-lib-"))
+        atexit.register(shutil.rmtree, d, True)
+        here = Path(__file__).parent
+        for name in ("harness.py", "seccomp.py"):
+            shutil.copyfile(here / name, d / name)
+        (d / "empty").mkdir()
+        kit = d / "kit" / "dtscal_lib"
+        kit.mkdir(parents=True)
+        for mod in KIT_ALLOWED:  # dtscal_lib.duckietown -> dtscal_lib/duckietown.py
+            rel = mod.split(".", 1)[1].replace(".", "/") + ".py"
+            (kit / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(_kit_dir() / rel, kit / rel)
+        for p in [d, *d.rglob("*")]:
+            os.chmod(p, 0o755 if p.is_dir() else 0o644)
+        _LIB["dir"] = d
+        return d
+
+
+#: the interpreter the sandbox runs (default: this grader's own, without its virtualenv) and the
+#: folder holding numpy (default: this grader's numpy): settings for a grader whose Python lies
+#: where the sandbox's user cannot read it (the tests' unprivileged user)
+INTERPRETER: str | None = None
+NUMPY_SITE: str | None = None
+
+
+_PATHS: dict = {}
+
+
+def _python() -> tuple[str, list[str], list[str]]:
+    """(interpreter, folders to bind read-only, numpy's folders + the standard library) for the sandbox."""
+    key = (INTERPRETER, NUMPY_SITE)
+    if key not in _PATHS:
+        _PATHS[key] = _find_python()
+    exe, binds, numpy_binds = _PATHS[key]
+    return exe, list(binds), list(numpy_binds)
+
+
+def _find_python() -> tuple[str, list[str], list[str]]:
+    import sysconfig
+
+    if INTERPRETER:
+        exe = os.path.realpath(INTERPRETER)
+        out = subprocess.run([exe, "-I", "-S", "-c", "import sys, sysconfig; print(sys.base_prefix); "
+                              "print(sysconfig.get_paths()['stdlib'])"], capture_output=True, text=True, check=True)
+        prefix, stdlib = out.stdout.split("\n")[:2]
+    else:
+        exe, prefix, stdlib = os.path.realpath(sys.executable), sys.base_prefix, sysconfig.get_paths()["stdlib"]
+    binds = {os.path.realpath(prefix)}
+    stdlib = os.path.realpath(stdlib)
+    if not any(stdlib == b or stdlib.startswith(b + os.sep) for b in binds):
+        binds.add(stdlib)
+    site = NUMPY_SITE or os.path.dirname(os.path.dirname(os.path.realpath(np.__file__)))
+    numpy_binds = [os.path.join(site, n) for n in ("numpy", "numpy.libs") if os.path.isdir(os.path.join(site, n))]
+    return exe, sorted(binds), numpy_binds + [stdlib]
+
+
+#: folders of /usr that hold Python packages (Debian's cv2, ROS, ...) or an OpenCV: covered
+USR_HIDDEN = ("/usr/local", "/usr/lib/python3", "/usr/lib/python3/dist-packages", "/usr/share", "/usr/src",
+              "/usr/include", "/usr/games", "/usr/sbin", "/usr/bin")
+
+
+def _opencv_libraries() -> list[str]:
+    found = []
+    for d in ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib", "/usr/lib64"):
+        try:
+            names = os.listdir(d)
+        except OSError:
+            continue
+        found += [os.path.join(d, n) for n in names if n.startswith(("libopencv", "cv2"))]
+    return found
+
+
+SANDBOX_UID_BASE = 64000
+SANDBOX_HOME = "/tmp"
+
+
+def bwrap_argv(slot: int, seccomp_fd: int | None) -> list[str]:
+    """bubblewrap's command line for one submission in uid slot ``slot``."""
+    exe, binds, numpy_binds = _python()
+    stdlib = numpy_binds.pop()
+    lib = sandbox_lib()
+    uid = SANDBOX_UID_BASE + slot
+    argv = ["bwrap", "--unshare-all", "--unshare-user", "--uid", str(uid), "--gid", str(uid),
+            "--die-with-parent", "--new-session", "--cap-drop", "ALL", "--clearenv",
+            "--setenv", "PATH", "/nonexistent", "--setenv", "LANG", "C.UTF-8", "--setenv", "OPENBLAS_NUM_THREADS", "1",
+            "--ro-bind", "/usr", "/usr"]
+    for link in ("lib", "lib64", "lib32", "bin", "sbin"):
+        if os.path.islink(f"/{link}"):
+            argv += ["--symlink", os.readlink(f"/{link}"), f"/{link}"]
+    def hidden(p):
+        return any(p == h or p.startswith(h + os.sep) for h in USR_HIDDEN)
+
+    empty = str(lib / "empty")  # an empty read-only folder laid over what the sandbox must not see
+    for h in USR_HIDDEN:
+        if os.path.isdir(h) and not any(b == h or b.startswith(h + os.sep) for b in binds) and \
+                not any(h.startswith(o + os.sep) for o in USR_HIDDEN):
+            argv += ["--ro-bind", empty, h]
+    for f in _opencv_libraries():
+        argv += ["--ro-bind", "/dev/null", f]
+    for b in binds:
+        if not (b == "/usr" or (b.startswith("/usr/") and not hidden(b))):
+            argv += ["--ro-bind", b, b]
+    for pkgs in ("site-packages", "dist-packages"):  # the base interpreter's own packages (an OpenCV?)
+        if os.path.isdir(os.path.join(stdlib, pkgs)):
+            argv += ["--ro-bind", empty, os.path.join(stdlib, pkgs)]
+    if hidden(exe):  # the interpreter itself, under a covered /usr/bin (it finds its library by its prefix)
+        argv += ["--ro-bind", exe, "/sandbox/bin/" + os.path.basename(exe)]
+        exe = "/sandbox/bin/" + os.path.basename(exe)
+    for b in numpy_binds:
+        argv += ["--ro-bind", b, f"/sandbox/site/{os.path.basename(b)}"]
+    argv += ["--ro-bind", str(lib), "/sandbox/harness", "--proc", "/proc", "--dev", "/dev",
+             "--size", str(TMPFS_MB * 2 ** 20), "--tmpfs", SANDBOX_HOME, "--chdir", SANDBOX_HOME,
+             "--setenv", "HOME", SANDBOX_HOME, "--setenv", "PYTHONPATH", "/sandbox/harness:/sandbox/site",
+             "--remount-ro", "/"]
+    if seccomp_fd is not None:
+        argv += ["--seccomp", str(seccomp_fd)]
+    # -I ignores PYTHONPATH: the harness sets sys.path itself (see _entry)
+    return argv + ["--", exe, "-I", "-S", "-c", _ENTRY.format(harness="/sandbox/harness", site="/sandbox/site")]
+
+
+_ENTRY = ("import sys; sys.path[:0] = [{harness!r}, {site!r}]; import runpy; "
+          "runpy.run_path({harness!r} + '/harness.py', run_name='__main__')")
+
+
+def _bare_argv() -> list[str]:
+    exe, _, numpy_binds = _python()
+    lib = sandbox_lib()
+    return [exe, "-I", "-S", "-c", _ENTRY.format(harness=str(lib), site=os.path.dirname(numpy_binds[0]))]
+
+
+_PROBE: dict = {}
+
+
+def bwrap_available() -> tuple[bool, str]:
+    """Does bubblewrap run here (as this user)? (yes/no, why not). Probed once."""
+    with _LIB_LOCK:
+        if "result" in _PROBE:
+            return _PROBE["result"]
+    if shutil.which("bwrap") is None:
+        result = (False, "bubblewrap (bwrap) is not installed: run scripts/install-sandbox.sh")
+    else:
+        argv = bwrap_argv(0, None)
+        i = argv.index("--")
+        try:
+            run = subprocess.run(argv[:i + 1] + [argv[i + 1], "-I", "-S", "-c", "pass"], capture_output=True,
+                                 timeout=60, stdin=subprocess.DEVNULL)
+            result = (run.returncode == 0, run.stderr.decode(errors="replace").strip()[-300:])
+        except (OSError, subprocess.SubprocessError) as exc:
+            result = (False, str(exc))
+    with _LIB_LOCK:
+        _PROBE["result"] = result
+    return result
+
+
+def mode() -> str:
+    if MODE:
+        return MODE
+    return "bubblewrap" if bwrap_available()[0] else "bare"
+
+
+def barriers() -> dict:
+    """What holds around a submission on this machine, in words (results.json, command line)."""
+    m = mode()
+    sec = ("seccomp: no exec, no ptrace/mount/unshare/bpf/keyctl/memfd_create/io_uring/sockets; the student's "
+           "code can start no process or thread and signal only itself" if seccomp.supported()
+           else "no seccomp filter (no system-call table for this architecture)")
+    out = {"mode": m, "seccomp": sec,
+           "memory": "address space capped per process (--mem); the student's code runs in one process that "
+                     "can start no other, so the cap bounds the submission",
+           "answers": "values only, over a capped length-prefixed pipe; judged outside the sandbox"}
+    if m == "bubblewrap":
+        out.update(filesystem="bubblewrap: only the interpreter, numpy and the kit's allowed modules, read-only; "
+                              f"a private {TMPFS_MB} MB tmpfs; no kit checkout, grading material, home, /etc or "
+                              "other submissions",
+                   network="network namespace: no network, no host socket",
+                   processes="PID namespace: the submission sees and signals only its own processes, all die "
+                             "with it",
+                   user="user namespace: a uid per concurrent submission (lock files shared by all graders)")
+    else:
+        why = bwrap_available()[1] if MODE is None else "bubblewrap turned off"
+        out.update(filesystem=f"NO filesystem barrier ({why}): the student's code reads what the grader's user "
+                              "can read; OpenCV and the kit's solvers are refused only by the import rule",
+                   network="no network namespace: sockets refused by seccomp",
+                   processes="no PID namespace: the student's code can start no process (seccomp)",
+                   user="the grader's own user")
+    return out
+
+
+# --------------------------------------------------------------------------- uids
+
+
+class _Slots:
+    """A uid slot per concurrent submission, on this machine: a lock file per slot (flock),
+    so two graders started at once never run submissions under the same uid."""
+
+    DIR = Path(tempfile.gettempdir()) / "dtscal-grade-slots"
+
+    def __init__(self):
+        self.lock = threading.Lock()
+
+    def take(self) -> tuple[int, int]:
+        try:
+            self.DIR.mkdir(mode=0o1777, exist_ok=True)
+            os.chmod(self.DIR, 0o1777)
+        except OSError:
+            pass
+        for k in range(4096):
+            try:
+                fd = os.open(self.DIR / f"slot{k}-uid{os.getuid()}", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+            except OSError:
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return k, fd
+            except OSError:
+                os.close(fd)
+        raise GraderError("no free uid slot for a sandbox")
+
+    @staticmethod
+    def give(fd: int) -> None:
+        os.close(fd)  # releases the flock
+
+
+_SLOTS = _Slots()
+
+
+# --------------------------------------------------------------------------- running
+
+
+def _as_job(c) -> CheckJob:
+    if isinstance(c, CheckJob):
+        return c
+    return CheckJob(id=int(c["id"]), calls=list(c["calls"]), wall=float(c["wall"]), cpu=int(c["cpu"]),
+                    substitute=list(c.get("substitute", ())))
+
+
+def run_calls(statements: list[tuple[str, int]], checks: list, *, blocked_paths=(),
+              mem_mb: int = MEM_MB, output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None) -> SandboxRun:
+    """Run ``checks`` (:class:`CheckJob`, or dicts with the same keys) on the submission.
+
+    Parameters
+    ----------
+    statements : the submission's import/def statements ``(source, first line)``
+    checks : inputs only; the answers are judged by the caller
+    blocked_paths : folders the student process may not read (grading material, solutions);
+        with bubblewrap nothing outside the sandbox's own list is visible anyway
+    workdir_files : ``{name: bytes}`` written into the working folder
+
+    Returns
+    -------
+    SandboxRun
+        A :class:`CheckRun` for every check id, with ``failure`` set for checks that did not
+        finish; ``load_errors`` lists statements that failed or killed the process.
+
+    Raises
+    ------
+    GraderError
+        when the sandbox failed on the grader's side :data:`RETRIES` times ("not graded: grader
+        error, rerun"; never the student's zero).
+    """
+    from .loader import CV2_DENY, KIT_ALLOWED
+
+    jobs = [_as_job(c) for c in checks]
+    run = SandboxRun()
+    m = mode()
+    run.notes.update(barriers())
+    run.notes["pid_namespace"] = m == "bubblewrap"
+    run.notes["survivors"] = 0
+    skip: list[int] = []
+    todo = list(jobs)
+    errors = []
+    for attempt in range(RETRIES):
+        if not todo:
+            break
+        job = SandboxJob(statements=list(statements), checks=todo, skip=list(skip), mem_mb=int(mem_mb),
+                         output_limit=int(output_chars), load_wall=LOAD_WALL_S, workdir=SANDBOX_HOME
+                         if m == "bubblewrap" else "", workdir_files=dict(workdir_files or {}),
+                         cv2_deny=sorted(CV2_DENY), kit_allowed=list(KIT_ALLOWED),
+                         kit_dir="/sandbox/harness/kit" if m == "bubblewrap" else str(sandbox_lib() / "kit"), mode=m)
+        try:
+            _one_sandbox(job, run, skip)
+        except GraderError as exc:
+            errors.append(str(exc))
+            time.sleep(0.2 * (attempt + 1))
+        todo = [c for c in jobs if c.id not in run.checks]
+    if todo:
+        raise GraderError(f"{GRADER_ERROR} ({'; '.join(errors)[-600:]})")
+    return run
+
+
+def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
+    m = job.mode
+    slot, slot_fd = _SLOTS.take()
+    workdir = None
+    sec_r = None
+    try:
+        if m == "bubblewrap":
+            if seccomp.supported():
+                sec_r, sec_w = os.pipe()
+                os.write(sec_w, seccomp.sandbox_filter())
+                os.close(sec_w)
+            argv = bwrap_argv(slot, sec_r)
+            env = {}
+        else:
+            workdir = tempfile.mkdtemp(prefix="dtscal-grade-")
+            job.workdir = workdir
+            argv = _bare_argv()
+            env = {"LANG": "C.UTF-8", "PATH": "/nonexistent", "OPENBLAS_NUM_THREADS": "1"}
+        run.notes["uid"] = SANDBOX_UID_BASE + slot if m == "bubblewrap" else os.getuid()
+        try:
+            proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    pass_fds=(sec_r,) if sec_r is not None else (), env=env, cwd="/",
+                                    start_new_session=True)
+        except OSError as exc:
+            raise GraderError(f"the sandbox did not start: {exc}") from None
+        finally:
+            if sec_r is not None:
+                os.close(sec_r)
+                sec_r = None
+        err: list[bytes] = []
+        drainer = threading.Thread(target=_drain, args=(proc.stderr, 8000, err), daemon=True)
+        drainer.start()
+        try:
+            _converse(proc, job, run, skip, err)
+        finally:
+            procs = _descendants(proc.pid)  # the sandbox's processes, looked for again once it is gone
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except OSError:
+                pass
+            proc.wait()
+            run.notes["survivors"] = run.notes.get("survivors", 0) + _survivors(procs)
+            drainer.join(timeout=2)
+            for f in (proc.stdin, proc.stdout, proc.stderr):
+                try:
+                    f.close()
+                except OSError:
+                    pass
+    finally:
+        if sec_r is not None:
+            os.close(sec_r)
+        if workdir:
+            shutil.rmtree(workdir, ignore_errors=True)
+        _SLOTS.give(slot_fd)
+
+
+def _stat(pid: int) -> list[str] | None:
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return text[text.rindex(")") + 2:].split()
+
+
+def _descendants(root: int) -> dict[int, str]:
+    """``{pid: start time}`` of ``root`` and every process below it."""
+    parent = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            f = _stat(int(d))
+            if f is not None and f[0] not in "ZX":
+                parent[int(d)] = (int(f[1]), f[19])
+    found, todo = {}, [root]
+    while todo:
+        p = todo.pop()
+        if p in parent and p not in found:
+            found[p] = parent[p][1]
+            todo += [c for c, (pp, _) in parent.items() if pp == p]
+    return found
+
+
+def _survivors(procs: dict[int, str], rounds: int = 50) -> int:
+    """How many of ``procs`` still live (same pid, same start time) after ``rounds`` SIGKILLs."""
+    alive = []
+    for _ in range(rounds):
+        alive = [p for p, start in procs.items() if (f := _stat(p)) is not None and f[19] == start and f[0] not in "ZX"]
+        if not alive:
+            return 0
+        for p in alive:
+            try:
+                os.kill(p, signal.SIGKILL)
+            except OSError:
+                pass
+        time.sleep(0.01)
+    return len(alive)
 
 
 def _drain(stream, keep: int, sink: list) -> None:
@@ -200,284 +686,89 @@ def _drain(stream, keep: int, sink: list) -> None:
         size += len(chunk)
 
 
-def run_calls(statements: list[tuple[str, int]], checks: list, *, blocked_paths=(),
-              mem_mb: int = MEM_MB, output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None) -> SandboxRun:
-    """Run ``checks`` (each a :class:`.jobs.Job`, or ``{"id", "calls": [(name, args)], "wall", "cpu"}``) on the
-    submission.
-
-    Parameters
-    ----------
-    statements : the submission's import/def statements ``(source, first line)``
-    checks : inputs only; the answers are judged by the caller
-    blocked_paths : folders the student process may not read (grading material, solutions)
-    workdir_files : ``{name: bytes}`` copied into the temporary working folder
-
-    Returns
-    -------
-    SandboxRun
-        A :class:`CheckRun` for every check id, with ``failure`` set for checks that did not
-        finish; ``load_errors`` lists statements that failed or killed the process.
-    """
-    run = SandboxRun()
-    skip: set[int] = set()
-    checks = [as_wire(c) for c in checks]  # :class:`.jobs.Job` (the grader's plan) as the child reads it
-    todo = list(checks)
-    attempts = 0
-    while todo and attempts < len(checks) + len(statements) + 2:
-        attempts += 1
-        todo = _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars, workdir_files or {})
-    for c in todo:
-        run.checks.setdefault(c["id"], CheckRun(failure="not run: the submission kept killing the grading process"))
-    return run
-
-
-class _ForkServer:
-    """One pre-imported ``child.py --serve`` process that forks a fresh process per submission
-    (saves the second that importing numpy and OpenCV costs each time). Thread-safe."""
-
-    def __init__(self):
-        self.lock = threading.Lock()
-        self.proc: subprocess.Popen | None = None
-        self.sock: socket.socket | None = None
-
-    def _start(self) -> None:
-        ours, theirs = socket.socketpair()
-        env = {k: v for k, v in os.environ.items() if k in ("PATH", "LANG", "LC_ALL", "VIRTUAL_ENV")}
-        env.update(MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-        self.proc = subprocess.Popen([sys.executable, "-I", str(CHILD), "--serve", str(theirs.fileno())],
-                                     pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd="/",
-                                     start_new_session=True)
-        theirs.close()
-        self.sock = ours
-
-    def spawn(self, job: dict) -> tuple[int, int, int]:
-        """Start ``job``; returns (pid, control pipe read end, output pipe read end)."""
-        data = pickle.dumps(job)
-        r_ctl, w_ctl = os.pipe()
-        r_out, w_out = os.pipe()
-        try:
-            with self.lock:
-                for attempt in (0, 1):
-                    if self.proc is None or self.proc.poll() is not None:
-                        self._start()
-                    try:
-                        socket.send_fds(self.sock, [len(data).to_bytes(8, "big")], [w_ctl, w_out])
-                        self.sock.sendall(data)
-                        pid = int.from_bytes(_recv_exact(self.sock, 8), "big")
-                        break
-                    except OSError:
-                        self.close()
-                        if attempt:
-                            raise
-        finally:
-            os.close(w_ctl)
-            os.close(w_out)
-        return pid, r_ctl, r_out
-
-    def close(self) -> None:
-        if self.sock is not None:
-            self.sock.close()
-            self.sock = None
-        if self.proc is not None:
-            self.proc.kill()
-            self.proc.wait()
-            self.proc = None
+def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list) -> None:
+    data = pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL)
+    try:
+        proc.stdin.write(struct.pack(">Q", len(data)) + data)
+        proc.stdin.close()
+    except OSError as exc:
+        raise GraderError(f"the sandbox did not take its job: {exc}; {b''.join(err).decode(errors='replace')}") \
+            from None
+    by_id = {c.id: c for c in job.checks}
+    fd = proc.stdout.fileno()
+    buf = bytearray()
+    deadline = time.monotonic() + job.load_wall + 10
+    hello = False
+    while True:
+        frame = _next_frame(fd, buf, deadline)
+        if frame is None:
+            proc.poll()
+            why = "stopped answering" if time.monotonic() > deadline else "ended"
+            raise GraderError(f"the sandbox {why} (exit status {proc.returncode}): "
+                              + b"".join(err).decode(errors="replace")[-1500:].strip())
+        header, blobs = frame
+        ev = header.get("event")
+        if ev == "hello":
+            hello = True
+            run.notes.update({str(k): str(v)[:300] for k, v in dict(header.get("notes", {})).items()})
+        elif not hello:
+            raise GraderError("the sandbox broke its protocol")
+        elif ev == "load_error":
+            k = header.get("k")
+            if isinstance(k, int) and 0 <= k < len(job.statements):
+                run.load_errors.append((k, str(header.get("error", ""))[:400]))
+                if k not in skip:
+                    skip.append(k)
+        elif ev == "ready":
+            deadline = time.monotonic() + (job.checks[0].wall + 10 if job.checks else 10)
+        elif ev == "check":
+            cid = header.get("id")
+            if cid not in by_id or cid in run.checks:
+                raise GraderError("the sandbox broke its protocol")
+            c = by_id[cid]
+            status = str(header.get("status", ""))[:40]
+            answer = last_answer(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
+            calls = decode_answers(answer) if answer is not None else None
+            if calls is None:
+                run.checks[cid] = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb))
+            else:
+                run.checks[cid] = CheckRun(calls=calls)
+            nxt = next((x for x in job.checks if x.id not in run.checks), None)
+            deadline = time.monotonic() + (nxt.wall + 10 if nxt else 10)
+        elif ev == "finished":
+            return
 
 
-def _recv_exact(sock: socket.socket, n: int) -> bytes:
-    buf = b""
-    while len(buf) < n:
-        chunk = sock.recv(n - len(buf))
+def _next_frame(fd: int, buf: bytearray, deadline: float):
+    """Read one frame from the harness (the trusted zygote: still capped)."""
+    need = None
+    while True:
+        if len(buf) >= 4 and need is None:
+            (n,) = struct.unpack_from(">I", buf, 0)
+            if n > MAX_HEADER_BYTES:
+                return None
+            if len(buf) >= 4 + n:
+                try:
+                    header = json.loads(bytes(buf[4: 4 + n]))
+                    sizes = header["blobs"]
+                    if not isinstance(header, dict) or len(sizes) > 1 or \
+                            not all(isinstance(s, int) and 0 <= s <= MAX_ANSWER_BYTES + MAX_HEADER_BYTES + 16
+                                    for s in sizes):
+                        return None
+                except (ValueError, KeyError, TypeError):
+                    return None
+                need = 4 + n + sum(sizes)
+        if need is not None and len(buf) >= need:
+            blobs, pos = [], 4 + n
+            for s in sizes:
+                blobs.append(bytes(buf[pos: pos + s]))
+                pos += s
+            del buf[:need]
+            return header, blobs
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            return None
+        chunk = os.read(fd, 1 << 20)
         if not chunk:
-            raise OSError("the fork server closed its socket")
+            return None
         buf += chunk
-    return buf
-
-
-CHILD = Path(__file__).with_name("child.py")
-_SERVER = _ForkServer()
-atexit.register(_SERVER.close)
-
-
-class _UidSlots:
-    """Concurrent submissions get different uids (as root): slot k -> a uid no account uses."""
-
-    def __init__(self):
-        self.lock, self.used = threading.Lock(), set()
-
-    def take(self) -> int:
-        with self.lock:
-            k = next(i for i in range(len(self.used) + 1) if i not in self.used)
-            self.used.add(k)
-            return k
-
-    def give(self, k: int) -> None:
-        with self.lock:
-            self.used.discard(k)
-
-
-_SLOTS = _UidSlots()
-
-
-def _one_child(statements, todo, skip, run, blocked_paths, mem_mb, output_chars, files) -> list[dict]:
-    """One sandboxed process; returns the checks still to run (after a crash of the process itself)."""
-    from .barriers import free_uid
-
-    slot = _SLOTS.take()
-    uid = free_uid(slot) if os.getuid() == 0 else None
-    tmp = Path(tempfile.mkdtemp(prefix="dtscal-grade-"))  # 0700
-    work, out = tmp / "work", tmp / "work" / ".answers"
-    out.mkdir(parents=True)
-    for name, data in files.items():
-        (work / name).write_bytes(data)
-    if uid is not None:  # the submission's uid owns its working folder, and nothing else
-        for d in (tmp, work, out, *(work / n for n in files)):
-            os.chown(d, uid, uid)
-    job = {"statements": statements, "skip": sorted(skip), "checks": todo, "workdir": str(work),
-           "outdir": str(out), "mem_mb": mem_mb, "output_limit": output_chars, "uid": uid,
-           "blocked_paths": [str(p) for p in blocked_paths], "without": sorted(WITHOUT)}
-    pid, r_ctl, r_out = _SERVER.spawn(job)
-    sink: list[bytes] = []
-    stdout = os.fdopen(r_out, "rb", buffering=0)
-    drainer = threading.Thread(target=_drain, args=(stdout, 4000, sink), daemon=True)
-    drainer.start()
-    remaining = list(todo)
-    by_id = {c["id"]: c for c in todo}
-    loader = None
-    try:
-        buf = b""
-        current, loading, nonce = None, None, ""
-        deadline = time.monotonic() + LOAD_WALL_S
-        while True:
-            wait = deadline - time.monotonic()
-            ready = select.select([r_ctl], [], [], max(0.0, wait))[0] if wait > 0 else []
-            if not ready:  # a deadline passed: the process itself is stuck
-                _kill(pid, loader)
-                if current is not None:
-                    run.checks[current] = CheckRun(failure=_describe("wall", by_id[current]["wall"], 0, mem_mb))
-                    remaining = [c for c in remaining if c["id"] != current]
-                elif loading is not None:
-                    skip.add(loading)
-                    run.load_errors.append((loading, "loading this statement did not finish in time; skipped"))
-                return remaining
-            chunk = os.read(r_ctl, 65536)
-            if not chunk:  # the process died
-                if current is not None:
-                    run.checks[current] = CheckRun(failure="the grading process was killed during this check")
-                    remaining = [c for c in remaining if c["id"] != current]
-                elif loading is not None:
-                    skip.add(loading)
-                    run.load_errors.append((loading, "loading this statement ended the process; skipped"))
-                elif not run.notes:
-                    time.sleep(0.2)
-                    raise RuntimeError("the grading process failed to start:\n"
-                                       + b"".join(sink).decode(errors="replace")[-2000:])
-                return remaining
-            buf += chunk
-            while b"\n" in buf:  # written by the supervisor only (no student code runs there)
-                line, buf = buf.split(b"\n", 1)
-                try:
-                    msg = json.loads(line)
-                    ev = msg.get("event")
-                    if ev in ("load", "load_error", "start", "done"):
-                        key = int(msg["id"] if ev in ("start", "done") else msg["k"])
-                        if ev in ("start", "done") and key not in by_id:
-                            continue
-                except (ValueError, KeyError, TypeError, AttributeError):
-                    continue
-                if ev == "loader":
-                    loader = int(msg.get("pid", 0)) or None
-                elif ev == "sandbox":
-                    run.notes = dict(msg.get("notes", {}))
-                    run.notes["uid"] = uid
-                elif ev == "load":
-                    loading = int(msg["k"])
-                elif ev == "load_error":
-                    run.load_errors.append((int(msg["k"]), str(msg.get("error", ""))[:400]))
-                    skip.add(int(msg["k"]))
-                elif ev == "ready":
-                    loading = None
-                elif ev == "start":
-                    current, nonce = int(msg["id"]), str(msg.get("nonce", ""))
-                    deadline = time.monotonic() + by_id[current]["wall"] + 5.0
-                elif ev == "done":
-                    cid = int(msg["id"])
-                    c = by_id[cid]
-                    calls = _read_results(out, cid, nonce) if cid == current else None
-                    if calls is None:
-                        failure = _describe(str(msg.get("status", "")), c["wall"], c["cpu"], mem_mb)
-                        run.checks[cid] = CheckRun(failure=failure)
-                    else:
-                        run.checks[cid] = CheckRun(calls=calls)
-                    remaining = [r for r in remaining if r["id"] != cid]
-                    current, nonce = None, ""
-                    deadline = time.monotonic() + 30.0
-                elif ev == "finished":
-                    return remaining
-    finally:
-        _kill(pid, loader)
-        left = _survivors(pid, loader, uid, pid_namespace=bool(run.notes.get("pid_namespace")))
-        run.notes["survivors"] = run.notes.get("survivors", 0) + left
-        os.close(r_ctl)
-        drainer.join(timeout=2)
-        stdout.close()
-        shutil.rmtree(tmp, ignore_errors=True)
-        _SLOTS.give(slot)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat[stat.rindex(")") + 2] not in "ZX"
-
-
-def _survivors(sid: int, loader: int | None, uid: int | None, rounds: int = 50, pid_namespace=False) -> int:
-    """Kill what is left of a submission (its session, its loader, its uid); returns how many
-    processes were still alive after ``rounds`` attempts (0: nothing survives). In a PID
-    namespace it is enough that its init (the loader) is gone: the kernel kills the rest."""
-    if pid_namespace and loader:
-        for _ in range(rounds):
-            if not _alive(loader) and not _alive(sid):
-                return 0
-            _kill(sid, loader)
-            time.sleep(0.005)
-        pid_namespace = False  # the init would not die: look for everything
-    found: list[int] = []
-    for _ in range(rounds):
-        found = []
-        for d in os.listdir("/proc"):
-            if not d.isdigit():
-                continue
-            try:
-                stat = Path(f"/proc/{d}/stat").read_text()
-                fields = stat[stat.rindex(")") + 2:].split()
-                owner = os.stat(f"/proc/{d}").st_uid
-            except (OSError, ValueError):
-                continue
-            if fields[0] in "ZX":
-                continue
-            p = int(d)
-            if int(fields[3]) == sid or p == loader or (uid is not None and owner == uid):
-                found.append(p)
-                try:
-                    os.kill(p, signal.SIGKILL)
-                except OSError:
-                    pass
-        if not found:
-            return 0
-        time.sleep(0.02)
-    return len(found)
-
-
-def _kill(pid: int, loader: int | None = None) -> None:
-    """Kill a sandboxed supervisor, everything in its session, and its loader (init of the
-    submission's PID namespace: the kernel then kills every process in it)."""
-    for f, p in ((os.killpg, pid), (os.kill, loader)):
-        if p:
-            try:
-                f(p, signal.SIGKILL)
-            except OSError:
-                pass

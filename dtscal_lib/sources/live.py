@@ -648,7 +648,9 @@ def open_live(spec: str, *, realtime: bool = True, topic: str | None = None, loo
     low = text.lower()
     if low.startswith("ros:"):
         robot = text[4:].strip().strip("/")
-        if robot and not all(c.isalnum() or c == "_" for c in robot):
+        from ..calib_files import is_robot_name
+
+        if robot and not is_robot_name(robot):
             raise SourceError(f"{text!r}: a robot name has letters, digits and '_' only (e.g. ros:autobot01)")
         return RosLive(robot, topic=topic, master=master_uri)
     if low.startswith("device:") or is_live_spec(text):

@@ -31,7 +31,10 @@ def add_parsers(sub) -> None:
     sp.add_argument("--no-browser", action="store_true")
     sp.add_argument("--instructor", action="store_true", help="open solutions/ (the instructor's kit) instead")
     sp.add_argument("--update", action="store_true",
-                    help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/)")
+                    help="carry your code into the current notebooks/ (old notebooks kept in workspace/backups/), "
+                         "then open the course")
+    sp.add_argument("--no-open", action="store_true",
+                    help="prepare the workspace (and --update it) but do not start JupyterLab")
     sp.set_defaults(func=cmd_course)
 
     sp = sub.add_parser("handin", help="zip your workspace notebooks into handin/NAME.zip to hand in")
@@ -85,8 +88,16 @@ def cmd_course(args) -> int:
     root = repo_root()
     if args.update:
         report = workspace.update_workspace(root)
-        print(report.text())
-        return 0 if report.ok else 1
+        print(report.text(), flush=True)
+        if not report.ok:
+            print("the course was not opened: fix what the update says above, then run the update again",
+                  file=sys.stderr)
+            return 1
+    if args.no_open:
+        if not args.instructor:
+            workspace.ensure_workspace(root)
+        print("the course is ready; open it with `bash start.sh` (in a checkout: `dtscal course`)", file=sys.stderr)
+        return 0
     session_dir()  # fails early, with the fix, if the recording is missing
     cmd = workspace.jupyter_command(root, instructor=args.instructor, port=args.port, ip=args.ip,
                                     no_browser=args.no_browser)

@@ -31,6 +31,7 @@ import ast
 import contextlib
 import copy
 import io
+import os
 import re
 import shutil
 from pathlib import Path
@@ -59,8 +60,11 @@ RELEASE_MARKER = ".dtscal-release"
 RELEASE_TREES = ("dtscal_lib", "data")
 RELEASE_FILES = ("pyproject.toml", "LICENSE")
 #: the hand-out's own README and one-command start (written by :func:`release`)
-#: kit files the hand-out carries as they are (notebook 06 and the robot's error messages name the first)
+#: kit files the hand-out carries as they are (notebook 06 and the robot's error messages name the first);
+#: every script a shipped script sources (install-ros.sh's apt-wait.sh) comes along (:func:`sourced_scripts`)
 RELEASE_EXTRA = ("scripts/install-ros.sh", "docs/ta.md")
+#: the author of the hand-out's first commit: nobody's name, so the students' commits are theirs alone
+HANDOUT_AUTHOR = ("dtscal hand-out", "handout@dtscal.invalid")
 #: the hand-out is a git repository a GitHub Classroom push carries whole: the student's workspace
 #: (with workspace/.course/, which the next update needs) is in it, backups and the environment are not
 HANDOUT_GITIGNORE = """.venv/
@@ -96,10 +100,10 @@ On a machine with Python 3.11 or newer:
 bash start.sh
 ```
 
-The first run makes a Python environment in `.venv/` and installs the course into it (a few minutes;
-it prints each step and pip shows each package); then JupyterLab opens at notebook 01. Later runs start
-in seconds. Options: `bash start.sh --no-browser` prints the address to open instead; `--port 8890`
-picks another port.
+The first run makes a Python environment in `.venv/` and installs the course into it (under a minute
+with a fast connection; it prints each step and the installer, uv or else pip, lists each package); then
+JupyterLab opens at notebook 01. Later runs start in seconds. Options: `bash start.sh --no-browser` prints
+the address to open instead; `--port 8890` picks another port; `--setup-only` installs and stops.
 
 ## Where you work
 
@@ -125,13 +129,14 @@ Your instructor says which of the two:
 ## A new version of the course
 
 If your instructor hands out a corrected course, unpack it into a new folder, copy your old
-`workspace/` folder into it, and run `bash start.sh --update`. Every notebook is updated cell by cell:
+`workspace/` folder into it, and run `bash start.sh --update` (it then opens the course; the options above
+work with it). Every notebook is updated cell by cell:
 the course's corrections arrive, and your code, your own cells and the outputs of unchanged cells stay.
 Code that has no place in the new notebooks (a function you renamed, say) is kept in a cell marked
 `KEPT BY THE UPDATE`; your previous notebooks are kept in `workspace/backups/`. If the update cannot
 finish (a full disk, a read-only notebook), it says what to do and changes nothing.
 
-## The robot (notebook 06)
+## With a real Duckiebot
 
 Notebook 06 runs on the recording without a robot. To calibrate a real Duckiebot you need ROS 1 on this
 computer (Debian or Ubuntu) and the robot on the same network:
@@ -148,31 +153,94 @@ why and what to do. On macOS or Windows, and for everything a TA sets up, see `d
 """
 START_SH = """#!/usr/bin/env bash
 # Start the course: make .venv on the first run, install the course into it, open JupyterLab at notebook 01.
-# Options go to `dtscal course`, e.g. --no-browser, --port 8890, --update; --handin writes handin/NAME.zip.
+# Options go to `dtscal course`, e.g. --no-browser, --port 8890, --update; --handin writes handin/NAME.zip;
+# --setup-only installs (and --update merges) without opening JupyterLab.
+# The first run installs with uv (from PyPI, pip's resolver and indexes, many times faster); if uv cannot be had
+# or fails, with pip. DTSCAL_INSTALLER=pip uses pip alone.
 set -euo pipefail
 cd "$(dirname "$0")"
 PYTHON="${PYTHON:-python3}"
+say() { echo "start.sh: $*" >&2; }
+ticking() {  # ticking WHAT COMMAND...: run COMMAND, saying every 5 s that WHAT goes on (never silent for long)
+  local what=$1 rc=0 tick
+  shift
+  (n=0; while sleep 5; do n=$((n + 5)); say "... $what ($n s)"; done) &
+  tick=$!
+  trap 'kill "$tick" 2>/dev/null' EXIT
+  "$@" || rc=$?
+  kill "$tick" 2>/dev/null || true
+  wait "$tick" 2>/dev/null || true
+  trap - EXIT
+  return "$rc"
+}
 if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
-  echo "start.sh: needs Python 3.11 or newer; install it, or run: PYTHON=/path/to/python3.11 bash start.sh" >&2
+  say "needs Python 3.11 or newer; install it, or run: PYTHON=/path/to/python3.11 bash start.sh"
   exit 2
 fi
+uv_env() {  # run uv with pip's own settings (index, extra indexes, find-links, constraints, certificate)
+  eval "$(.venv/bin/python - <<'PY'
+import shlex, subprocess, sys
+out = subprocess.run([sys.executable, "-m", "pip", "config", "list"], capture_output=True, text=True).stdout
+conf = {}
+for line in out.splitlines():  # section.key='value'; the environment (:env:) and install.* win over global.*
+    key, _, value = line.partition("=")
+    section, _, name = key.rpartition(".")
+    rank = {":env:": 3, "install": 2}.get(section, 1)
+    if value and rank >= conf.get(name, (0, ""))[0]:
+        conf[name] = (rank, value.strip("'\\""))
+uv = {"index-url": "UV_INDEX_URL", "extra-index-url": "UV_EXTRA_INDEX_URL", "find-links": "UV_FIND_LINKS",
+      "constraint": "UV_CONSTRAINT", "cert": "SSL_CERT_FILE", "trusted-host": "UV_INSECURE_HOST",
+      "timeout": "UV_HTTP_TIMEOUT", "default-timeout": "UV_HTTP_TIMEOUT"}
+for name, (_rank, value) in conf.items():
+    if name == "no-index" and value.lower() in ("1", "true", "yes", "on"):
+        print('set -- "$@" --no-index')  # uv has no variable for it: the flag, after uv's other arguments
+    elif name in uv:
+        value = ",".join(value.split()) if name == "find-links" else value
+        print(f"export {uv[name]}={shlex.quote(value)}")
+print("export UV_INDEX_STRATEGY=unsafe-best-match")  # pip's rule: the best version over every index
+PY
+)"
+  .venv/bin/uv "$@"
+}
 if ! .venv/bin/python -c 'import dtscal_lib, jupyterlab' 2>/dev/null; then
-  echo "start.sh: first run: installing the course into .venv (a few minutes; 3 steps)" >&2
+  say "first run: installing the course into .venv (3 steps; under a minute with the packages cached)"
   if [ ! -x .venv/bin/python ]; then
-    echo "start.sh: [1/3] making the course's Python environment in .venv" >&2
-    "$PYTHON" -m venv .venv
+    say "[1/3] making the course's Python environment in .venv"
+    ticking "making .venv" "$PYTHON" -m venv .venv
+  else
+    say "[1/3] .venv is there; completing it"
   fi
-  echo "start.sh: [2/3] updating pip" >&2
-  .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
-  echo "start.sh: [3/3] installing the course, JupyterLab and OpenCV (pip lists each package)" >&2
-  .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on -e .
-  echo "start.sh: installed; starting the course" >&2
+  installed=""
+  if [ "${DTSCAL_INSTALLER:-uv}" = uv ]; then
+    say "[2/3] getting the uv installer from PyPI into .venv (pip)"
+    if ticking "getting uv" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on uv; then
+      say "[3/3] installing the course, JupyterLab and OpenCV with uv (it lists each package)"
+      if ticking "installing with uv" uv_env pip install --python .venv/bin/python -e .; then
+        installed=uv
+      else
+        say "uv could not install the course; trying pip instead"
+      fi
+    else
+      say "uv is not available for this computer; installing with pip instead"
+    fi
+  fi
+  if [ -z "$installed" ]; then
+    say "[2/3] updating pip"
+    ticking "updating pip" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on --upgrade pip
+    say "[3/3] installing the course, JupyterLab and OpenCV with pip (pip lists each package)"
+    ticking "installing with pip" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on -e .
+  fi
+  say "installed"
 fi
 if [ "${1:-}" = "--handin" ]; then
   shift
   exec .venv/bin/dtscal handin "$@"
 fi
-exec .venv/bin/dtscal course "$@"
+args=()
+for a in "$@"; do
+  if [ "$a" = "--setup-only" ]; then args+=("--no-open"); else args+=("$a"); fi
+done
+exec .venv/bin/dtscal course ${args[@]+"${args[@]}"}
 """
 
 _DEF_RE = re.compile(r"^\s*def\s+([A-Za-z_]\w*)\s*\(")
@@ -485,7 +553,8 @@ def release(out_dir, repo_root=None) -> Path:
     (``scripts/install-ros.sh``, the TA page ``docs/ta.md``) and a ``.gitignore`` that keeps the
     student's ``workspace/`` in git (:data:`HANDOUT_GITIGNORE`). It holds no ``solutions/``, no
     ``grading/``, no ``tests/`` and no benchmarks. A folder written by an earlier release is replaced.
-    After writing, the release is scanned for solution code (:func:`find_solution_leaks`).
+    After writing, the release is scanned for solution code (:func:`find_solution_leaks`); then it is
+    made a git repository with one commit of everything in it, by :data:`HANDOUT_AUTHOR`.
 
     Returns
     -------
@@ -523,8 +592,9 @@ def release(out_dir, repo_root=None) -> Path:
     (out / ".gitignore").write_text(HANDOUT_GITIGNORE, encoding="utf-8")
     for f in RELEASE_EXTRA:
         if (root / f).is_file():
-            (out / f).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(root / f, out / f)
+            for g in (f, *sourced_scripts(root, f)):
+                (out / g).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(root / g, out / g)
     (out / RELEASE_MARKER).write_text("written by `dtscal release`; safe to delete and regenerate\n")
     leaks = find_solution_leaks(out, sources)
     if leaks:
@@ -532,7 +602,49 @@ def release(out_dir, repo_root=None) -> Path:
             "solution code leaked into the release (move it out of the library, or tag the cell "
             "'solution_only'):\n  " + "\n  ".join(leaks[:20])
         )
+    _git_init(out)
     return out
+
+
+#: ``source "$(dirname "$0")/x.sh"`` or ``. "$(dirname "$0")/x.sh"``: a script beside the script
+_SOURCED = re.compile(r"""^\s*(?:source|\.)\s+["']?\$\(dirname\s+["']?\$0["']?\)/([\w./-]+?)["']?\s*(?:#.*)?$""",
+                      re.M)
+
+
+def sourced_scripts(root: Path, script: str) -> list[str]:
+    """Every file ``script`` (a path relative to ``root``) sources from beside itself, and what those source."""
+    if not script.endswith(".sh"):
+        return []
+    found: list[str] = []
+    todo = [script]
+    while todo:
+        current = todo.pop()
+        for name in _SOURCED.findall((root / current).read_text(encoding="utf-8")):
+            rel = (Path(current).parent / name).as_posix()
+            if not (root / rel).is_file():
+                raise DtscalError(f"{current} sources {rel}, which the kit does not have; restore it (git checkout)")
+            if rel not in found and rel != script:
+                found.append(rel)
+                todo.append(rel)
+    return found
+
+
+def _git_init(out: Path) -> None:
+    """Make the hand-out a git repository with one commit of everything in it (what the README promises)."""
+    import subprocess
+
+    if shutil.which("git") is None:
+        raise DtscalError("git is not installed: the hand-out is a git repository; install git "
+                          "(sudo apt-get install git) and write the hand-out again")
+    name, email = HANDOUT_AUTHOR
+    env = {k: v for k, v in os.environ.items() if not k.startswith("GIT_")}
+    env.update(GIT_AUTHOR_NAME=name, GIT_AUTHOR_EMAIL=email, GIT_COMMITTER_NAME=name, GIT_COMMITTER_EMAIL=email)
+    opts = ["-c", "init.defaultBranch=main", "-c", "commit.gpgsign=false", "-c", "core.hooksPath=/dev/null"]
+    for args in (["init", "-q"], ["add", "-A"], ["commit", "-q", "-m", "the course as handed out"]):
+        res = subprocess.run(["git", *opts, *args], cwd=out, env=env, capture_output=True, text=True)
+        if res.returncode != 0:
+            raise DtscalError(f"git {args[0]} in {out} failed: {(res.stderr or res.stdout).strip()[:300]}; "
+                              "fix git's set-up and write the hand-out again")
 
 
 #: lines that only convert/validate inputs (``x = np.asarray(x, dtype=float).reshape(-1, 2)``):

@@ -333,7 +333,12 @@ def _regions_safe(source: str) -> dict[str, list[str]]:
 
 
 class _Lock:
-    """An exclusive ``flock`` on ``workspace/.update.lock``: a second update waits, then refuses."""
+    """An exclusive ``flock`` on ``workspace/.update.lock``: a second update waits, then refuses.
+
+    The file exists only while an update runs: the holder deletes it before it lets go, and a waiter
+    that wins the lock on a file already deleted (or replaced) opens the file anew, so two updates never
+    hold locks on two different files.
+    """
 
     def __init__(self, path: Path, wait_s: float):
         self.path, self.wait_s, self.fd = path, wait_s, None
@@ -349,7 +354,14 @@ class _Lock:
         while True:
             try:
                 fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                return self
+                if self._still_the_file():
+                    return self
+                os.close(self.fd)  # the previous holder deleted it while we waited: lock the new one
+                try:
+                    self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+                except OSError as exc:
+                    raise _os_error(exc, f"creating the update lock {self.path}") from None
+                continue
             except BlockingIOError:
                 if time.monotonic() > deadline:
                     os.close(self.fd)
@@ -358,7 +370,19 @@ class _Lock:
                         "to finish, then run the update again; nothing was changed") from None
                 time.sleep(0.2)
 
+    def _still_the_file(self) -> bool:
+        try:
+            st = os.stat(self.path)
+        except FileNotFoundError:
+            return False
+        mine = os.fstat(self.fd)
+        return (st.st_dev, st.st_ino) == (mine.st_dev, mine.st_ino)
+
     def __exit__(self, *exc):
+        try:
+            os.unlink(self.path)  # while still holding it: no empty lock file is left behind
+        except OSError:
+            pass  # a read-only workspace: the (empty) file stays; it is in .gitignore
         os.close(self.fd)  # closing releases the lock
 
 

@@ -47,21 +47,29 @@ class LiveExtrinsics(ExtrinsicDriver):
         there is one)
     board, robot, calibration_dir, realtime, loop, autostart : as for the calibrator; a
         recording loops by default (the robot stands still on the board)
+    robot_type : ``"duckiebot"`` or ``"dd24"``, when the board does not say which robot it is
+        (:mod:`dtscal_lib.profiles`; ``--robot-type`` of the command line)
     """
 
     def __init__(self, source, intrinsics, *, board: Board = DUCKIETOWN_BOARD, robot: str | None = None,
                  calibration_dir="calibrations", realtime: bool = True, loop: bool = True,
-                 autostart: bool = True):
+                 autostart: bool = True, robot_type: str | None = None):
         import ipywidgets as w
 
-        super().__init__(source, intrinsics, board=board, robot=robot, realtime=realtime, loop=loop)
+        super().__init__(source, intrinsics, board=board, robot=robot, realtime=realtime, loop=loop,
+                         robot_type=robot_type)
         lay = w.Layout
         self.status = w.HTML(render.message_html(f"connecting to {self.spec} ..."))
-        self.image = w.Image(format="jpeg", layout=lay(width="480px"))
-        self.top = w.Image(format="jpeg", layout=lay(width="320px"))
+        wait = render.placeholder_jpeg
+        self.image = w.Image(value=wait(f"waiting for the first frame from {self.spec}"), format="jpeg",
+                             layout=lay(width="480px"))
+        self.top = w.Image(value=wait("the board seen from above appears with the first fit", (320, 416)),
+                           format="jpeg", layout=lay(width="320px"))
         self.error_text = w.HTML("fit error: -")
-        self.grid = w.Image(format="jpeg", layout=lay(width="480px"))
-        self.birdseye = w.Image(format="jpeg", layout=lay(width="320px"))
+        self.grid = w.Image(value=wait("the ground grid appears with the first fit"), format="jpeg",
+                            layout=lay(width="480px"))
+        self.birdseye = w.Image(value=wait("the bird's-eye view appears with the first fit", (320, 416)),
+                                format="jpeg", layout=lay(width="320px"))
         self.save_button = w.Button(description="SAVE", disabled=True, button_style="success",
                                     tooltip="write the best homography so far")
         self.reset_button = w.Button(description="RESET BEST")
@@ -116,6 +124,9 @@ class LiveExtrinsics(ExtrinsicDriver):
     def _on_status(self, st) -> None:
         super()._on_status(st)
         self.status.value = render.source_status_html(self.spec, st, dict(st.bad), KEPT)
+        if st.frames == 0 and st.state in ("error", "ended"):  # nothing to show: say so where the image would be
+            self.image.value = render.placeholder_jpeg(f"no frame: could not connect to {self.spec} "
+                                                       "(the status line says why)", (640, 480))
 
     def _on_frame(self, frame) -> bool | None:
         """The loop body: the driver fits the frame; the views get it through the display pacer."""

@@ -67,7 +67,9 @@ class ExtrinsicDriver(LoopDriver):
     WAITING_PERIOD = 1.0
 
     def __init__(self, source, intrinsics, *, board: Board = DUCKIETOWN_BOARD, robot: str | None = None,
-                 realtime: bool = True, loop: bool = True):
+                 realtime: bool = True, loop: bool = True, robot_type: str | None = None):
+        from ..profiles import profile_for
+
         self.board = board
         self.spec = str(getattr(source, "spec", source))
         self.source = open_live(source, realtime=realtime, loop=loop) if isinstance(source, (str, Path)) else source
@@ -76,8 +78,10 @@ class ExtrinsicDriver(LoopDriver):
         self._intrinsics = intrinsics
         #: where the fits happen (the session the command line drives), keeping the best
         self.session = ExtrinsicSession(None, board, keep="best", source=self.spec,
-                                        robot=robot_name(self.spec, self.source, robot) or "camera")
-        self.ground_true = ground_points(board)
+                                        robot=robot_name(self.spec, self.source, robot) or "camera",
+                                        profile=profile_for(board, robot_type))
+        prof = self.session.profile  # the robot the board implies (dtscal_lib.profiles)
+        self.ground_true = ground_points(board, prof.near_row_x, prof.right_column_y)
         self.current = None
         self.reason = ""
         self.bad: Counter = Counter()

@@ -68,7 +68,8 @@ class LiveCalibrator(IntrinsicDriver):
         super().__init__(source, board=board, robot=robot, model=model, realtime=realtime, loop=loop)
         lay = w.Layout
         self.status = w.HTML(render.message_html(f"connecting to {self.spec} ..."))
-        self.image = w.Image(format="jpeg", layout=lay(width="640px"))
+        self.image = w.Image(value=render.placeholder_jpeg(f"waiting for the first frame from {self.spec}"),
+                             format="jpeg", layout=lay(width="640px"))
         self.bars = w.HTML(render.bars_html(CoverageTracker(board).bars()))
         self.count = w.HTML("samples: 0")
         self.thumb_box = w.HBox([], layout=lay(overflow="auto", width="660px", min_height="96px"))
@@ -94,7 +95,8 @@ class LiveCalibrator(IntrinsicDriver):
                                    layout=lay(width="420px"))
         self.message = w.HTML("")
         self.results = w.HTML(render.message_html("no calibration yet: fill the bars, then CALIBRATE"))
-        self.preview = w.Image(format="jpeg", layout=lay(width="640px"))
+        self.preview = w.Image(value=render.placeholder_jpeg("the undistorted view appears here after CALIBRATE"),
+                               format="jpeg", layout=lay(width="640px"))
         self.alpha = w.FloatSlider(value=0.0, min=0.0, max=1.0, step=0.05, description="alpha",
                                    continuous_update=False)
         for b, fn in ((self.calibrate_button, self.calibrate), (self.commit_button, self.commit),
@@ -130,6 +132,9 @@ class LiveCalibrator(IntrinsicDriver):
     def _on_status(self, st) -> None:
         super()._on_status(st)
         self.status.value = render.source_status_html(self.spec, st, {**st.bad, **self.bad}, KEPT)
+        if st.frames == 0 and st.state in ("error", "ended"):  # nothing to show: say so where the image would be
+            self.image.value = render.placeholder_jpeg(f"no frame: could not connect to {self.spec} "
+                                                       "(the status line says why)")
 
     def _on_frame(self, frame) -> bool | None:
         """The loop body: the driver takes the frame (detect, offer); draw, publish (False: frame skipped)."""

@@ -25,6 +25,32 @@ def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     return buf.tobytes()
 
 
+def placeholder_jpeg(text: str, size: tuple[int, int] = (640, 480)) -> bytes:
+    """A grey JPEG that says ``text``: what a live view shows before its first frame (a browser shows a
+    broken-image icon for an empty image), e.g. the preview before CALIBRATE or a robot that never answered.
+    Long text is wrapped at word boundaries."""
+    w, h = size
+    img = np.full((h, w, 3), 236, np.uint8)
+    cv2.rectangle(img, (0, 0), (w - 1, h - 1), (200, 200, 200), 2)
+    scale, thick = max(0.4, w / 1000.0), 1
+    lines, line = [], ""
+    for word in text.split():
+        trial = f"{line} {word}".strip()
+        if cv2.getTextSize(trial, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)[0][0] > w - 40 and line:
+            lines.append(line)
+            line = word
+        else:
+            line = trial
+    lines.append(line)
+    step = int(cv2.getTextSize("Ag", cv2.FONT_HERSHEY_SIMPLEX, scale, thick)[0][1] * 2.0)
+    y = (h - step * (len(lines) - 1)) // 2
+    for ln in lines:
+        tw = cv2.getTextSize(ln, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)[0][0]
+        cv2.putText(img, ln, ((w - tw) // 2, y), cv2.FONT_HERSHEY_SIMPLEX, scale, (90, 90, 90), thick, cv2.LINE_AA)
+        y += step
+    return encode_jpeg(img)
+
+
 def stamp_classes(index: int, arrival: float, shown: int | None = None, tool: str = "") -> tuple[str, ...]:
     """CSS classes that tag a live image with its frame and its arrival time (ms since the epoch).
 
@@ -144,10 +170,12 @@ def source_status_html(spec: str, status, bad: dict, kept: str) -> str:
     skipped frames by reason.
     """
     waiting = status.state == "connecting" and status.message and not status.message.startswith("connecting to ")
+    never = status.frames == 0  # a source that never sent a frame was never connected: it cannot be "lost"
     text = {"connecting": f"waiting for {spec}: {status.message}" if waiting else f"connecting to {spec} ...",
             "running": f"live: {spec}",
             "ended": f"source ended: {status.message}. {kept}; RECONNECT to go on.",
-            "error": f"source lost: {status.message}. {kept}; RECONNECT when it is back."}.get(
+            "error": (f"could not connect to {spec}: {status.message}. RECONNECT to try again." if never else
+                      f"source lost: {status.message}. {kept}; RECONNECT when it is back.")}.get(
         status.state, status.message)
     if bad:
         text += " (skipped frames: " + ", ".join(f"{k} {v}" for k, v in sorted(bad.items())) + ")"

@@ -1,0 +1,148 @@
+"""Duckietown's second robot, the Duckiedrone DD24: its board implies its profile, its frame calibrates.
+
+Sources (``data/duckietown/dd24/README.md``): the DD24's intrinsic file as Duckietown ships it in
+lib-dt-computer-vision (240x320, kept in ``data/duckietown/dd24/``), its board from the same library's ``boards.py``
+(``CalibrationBoardDD24``: 7x5 inner corners, 17 mm squares, outer corner at x = 0.25 m, y = -0.080 m), the camera
+about 5.6 cm above the board and 47 degrees down (Duckietown's real DD24 photograph, issue 21).
+
+No real DD24 photograph is stored here, so the frame is constructed: the board drawn with numpy and seen from that
+pose through the reference intrinsics scaled to the photographs' 480x640, distortion included (each pixel's ray
+from ``cv2.undistortPoints`` with the file's own K and D). The kit resizes it to the file's 240x320, rectifies,
+detects and fits: exit 0, and the ground under the board's corners within 1.5 mm of the construction. The same
+frame judged as a Duckiebot's (``--robot-type duckiebot``) is refused: a DD24's camera is no Duckiebot's.
+Agreement with Duckietown's reference ``homography.yaml`` (kept in ``data/duckietown/dd24/``; its ground frame is
+the board's own): ``tests/test_dd24_reference.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+REF = Path(__file__).resolve().parents[1] / "data" / "duckietown" / "dd24"
+INTRINSICS = REF / "calibration-intrinsic-dd24.yaml"
+SQUARE, OUTER_X, OUTER_Y = 0.017, 0.25, -0.080  # boards.py CalibrationBoardDD24
+HEIGHT, PITCH = 0.056, np.radians(47.0)
+CAMERA_AT = (0.19, -0.012)  # on the ground, behind the board, centred on it: the whole board in view
+
+
+def reference_camera():
+    d = yaml.safe_load(INTRINSICS.read_text())
+    return (np.array(d["camera_matrix"]["data"], float).reshape(3, 3),
+            np.array(d["distortion_coefficients"]["data"], float), (d["image_width"], d["image_height"]))
+
+
+def ground_to_camera():
+    """[r1 r2 t]: ground (x, y, 1) -> camera ray, for a camera looking forward (+x) and PITCH down."""
+    z = np.array([np.cos(PITCH), 0.0, -np.sin(PITCH)])
+    x = np.array([0.0, -1.0, 0.0])  # the image's right is the robot's right
+    R = np.stack([x, np.cross(z, x), z])
+    t = -R @ np.array([*CAMERA_AT, HEIGHT])
+    return np.column_stack([R[:, 0], R[:, 1], t])
+
+
+def dd24_frame(scale: int = 2, supersample: int = 2) -> np.ndarray:
+    """The raw (distorted) portrait frame, 480x640 grey, of the DD24 board lying at its place."""
+    K, D, (w, h) = reference_camera()
+    Ks = K * scale
+    Ks[2, 2] = 1.0
+    W, H, s = w * scale, h * scale, supersample
+    v, u = np.mgrid[0:H * s, 0:W * s]
+    pix = np.column_stack([(u.ravel() + 0.5) / s - 0.5, (v.ravel() + 0.5) / s - 0.5]).astype(np.float64)
+    rays = cv2.undistortPoints(pix.reshape(-1, 1, 2), Ks, D).reshape(-1, 2)
+    g = np.column_stack([rays, np.ones(len(rays))]) @ np.linalg.inv(ground_to_camera()).T
+    front = g[:, 2] > 0
+    gx, gy = g[:, 0] / g[:, 2], g[:, 1] / g[:, 2]
+    i, j = np.floor((gx - OUTER_X) / SQUARE), np.floor((gy - OUTER_Y) / SQUARE)
+    on_board = (i >= 0) & (i < 6) & (j >= 0) & (j < 8)
+    paper = (gx > OUTER_X - 0.02) & (gx < OUTER_X + 6 * SQUARE + 0.02) & (np.abs(gy - OUTER_Y - 4 * SQUARE) < 0.09)
+    grey = np.where(on_board, np.where((i + j) % 2 == 0, 235.0, 25.0), np.where(paper, 235.0, 100.0))
+    grey = np.where(front, grey, 100.0).reshape(H, s, W, s).mean(axis=(1, 3))
+    grey += np.random.default_rng(24).normal(0.0, 2.0, grey.shape)
+    return np.clip(np.rint(grey), 0, 255).astype(np.uint8)
+
+
+def dtscal(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "dtscal_lib.cli", *map(str, args)], capture_output=True,
+                          text=True, timeout=600, check=False)
+
+
+@pytest.fixture(scope="module")
+def frame_dir(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("dd24")
+    frame = dd24_frame()
+    assert frame.shape == (640, 480)  # portrait
+    cv2.imwrite(str(d / "dd24.png"), frame)
+    return d
+
+
+def test_a_dd24_frame_calibrates_and_its_ground_is_right(tmp_path, frame_dir):
+    p = dtscal("calibrate-extrinsics", "--source", frame_dir, "--intrinsics", INTRINSICS, "--square", "0.017",
+               "--robot", "dronebot", "--out", tmp_path, "-q", "--json")
+    assert p.returncode == 0, p.stderr
+    assert "warning" not in p.stderr, p.stderr  # the DD24's own file is inside the DD24's range
+    out = json.loads(p.stdout)
+    assert out["doubts"] == []
+    assert 0.05 < out["camera_pose"]["height_m"] < 0.062 and 44 < out["camera_pose"]["pitch_down_deg"] < 50
+    H = np.array(yaml.safe_load((tmp_path / "camera_extrinsic" / "dronebot.yaml").read_text())["homography"])
+    H = H.reshape(3, 3)
+    # the board's inner corners as the rectified 240x320 camera (P = K of the file) sees them, back to the ground
+    K, _, _ = reference_camera()
+    j, i = np.mgrid[0:5, 0:7]
+    ground = np.column_stack([OUTER_X + SQUARE * (1 + j.ravel()), OUTER_Y + SQUARE * (1 + i.ravel())])
+    q = np.column_stack([ground, np.ones(len(ground))]) @ (K @ ground_to_camera()).T
+    pix = q[:, :2] / q[:, 2:]
+    back = np.column_stack([pix, np.ones(len(pix))]) @ H.T
+    err_mm = 1000 * np.linalg.norm(back[:, :2] / back[:, 2:] - ground, axis=1)
+    assert err_mm.max() < 1.5, err_mm.max()
+
+
+def test_the_same_frame_as_a_duckiebots_is_refused(tmp_path, frame_dir):
+    p = dtscal("calibrate-extrinsics", "--source", frame_dir, "--intrinsics", INTRINSICS, "--square", "0.017",
+               "--robot-type", "duckiebot", "--robot", "dronebot", "--out", tmp_path, "-q")
+    # seen as a Duckiebot's, the DD24's normal H[1][2] > 0 is Duckietown's "corrupt" homography: no fit at all
+    assert p.returncode == 2, p.stderr
+    assert "H[1][2]" in p.stderr and "corrupt" in p.stderr and "Traceback" not in p.stderr
+    assert not (tmp_path / "camera_extrinsic").exists() or not any((tmp_path / "camera_extrinsic").iterdir())
+
+
+def test_the_board_implies_the_profile():
+    from dtscal_lib.boards import parse_board
+    from dtscal_lib.profiles import DD24, DUCKIEBOT, profile_for
+
+    assert profile_for(parse_board("7x5", 0.017)) is DD24 and profile_for(parse_board("7x5", 0.031)) is DUCKIEBOT
+    assert profile_for(parse_board("7x5", 0.017), "duckiebot") is DUCKIEBOT
+    # each profile's limits are its own rows of limits.py
+    from dtscal_lib.limits import LIMITS
+
+    assert DD24.pitch_down_deg == LIMITS["dd24_camera_pitch"].value != DUCKIEBOT.pitch_down_deg
+    assert DD24.height_m == LIMITS["dd24_camera_height"].value
+
+
+def test_notebook_06_tool_calibrates_the_dd24_frame(tmp_path, frame_dir):
+    """The live tool drives the same session: the DD24 frame gives the same kind of answer as the command line."""
+    from dtscal_lib.boards import Board
+    from dtscal_lib.sources.frame import Frame
+    from dtscal_lib.ui import LiveExtrinsics
+
+    # the live tool takes frames at the intrinsic file's size (240x320); the command line resizes them itself
+    frame = cv2.resize(cv2.imread(str(frame_dir / "dd24.png")), (240, 320), interpolation=cv2.INTER_AREA)
+    for robot_type, written in ((None, True), ("duckiebot", False)):
+        out = tmp_path / str(robot_type)
+        tool = LiveExtrinsics(str(frame_dir), intrinsics=str(INTRINSICS), board=Board(7, 5, SQUARE), robot="dronebot",
+                              calibration_dir=out, autostart=False, robot_type=robot_type)
+        try:
+            tool.loop.step(Frame(0, 0.0, frame, None, "dd24.png"))
+            assert (tool.best is not None) == written, (tool.bad, tool.reason, tool.session.last_error)
+            if written:
+                said = tool.save()
+                assert (out / "camera_extrinsic" / "dronebot.yaml").exists(), said
+        finally:
+            tool.close()
