@@ -24,7 +24,7 @@ from .loader import MAX_CODE_CHARS, MAX_NOTEBOOK_BYTES
 #: notebook is 0.59 MB); a member .py file: the loader's cap on code (256 kB)
 MAX_MEMBER_BYTES = MAX_NOTEBOOK_BYTES
 #: all members taken from one zip together: the seven course notebooks at the member cap would
-#: be 192 MiB; a real hand-in of the six solutions unpacks to 1.8 MB
+#: be 224 MiB; a real hand-in of the six solutions (before 03b) unpacked to 1.8 MB
 MAX_TOTAL_BYTES = 64 * 2 ** 20
 #: the zip file itself (its central directory is read whole by Python's zipfile)
 MAX_ZIP_BYTES = 64 * 2 ** 20
