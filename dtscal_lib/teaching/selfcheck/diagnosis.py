@@ -33,6 +33,7 @@ from ...camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
 from ...camera import undistort_normalized as _newton_undistort
 from ...homography import apply_homography
 from ...poses import board_homography, random_board_pose
+from .homography import raw_dlt as _raw_dlt  # the mistake model for "no normalization"
 from .projection import K_SKEWED
 
 __all__ = ["Mistake", "diagnose", "diagnose_function", "probe_args", "MISTAKES", "FUNCTIONS"]
@@ -79,16 +80,6 @@ def _hartley(p):
     c = p.mean(axis=0)
     s = np.sqrt(2.0) / np.mean(np.hypot(*(p - c).T))
     return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
-
-
-def _raw_dlt(src, dst):
-    """The unnormalized DLT (the mistake model for "no normalization")."""
-    rows = []
-    for (x, y), (u, v) in zip(src, dst):
-        rows.append([x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u])
-        rows.append([0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v])
-    h = np.linalg.svd(np.asarray(rows))[2][-1].reshape(3, 3)
-    return h / h[2, 2]
 
 
 @lru_cache(maxsize=None)

@@ -113,7 +113,7 @@ def _noisy_case(rng, n: int, sigma: float, offset: float = 0.0, span: float = 1.
     return src, dst, H_true
 
 
-def _raw_dlt(src, dst) -> np.ndarray:
+def raw_dlt(src, dst) -> np.ndarray:
     """The DLT without normalization (to recognise it, not to solve the exercise)."""
     rows = []
     for (x, y), (u, v) in zip(src, dst):
@@ -125,7 +125,7 @@ def _raw_dlt(src, dst) -> np.ndarray:
 
 def _evidence(H, src, dst) -> str:
     """What the answer shows about the cause, or '' (a hint never names a cause the answer does not show)."""
-    raw = _raw_dlt(src, dst)
+    raw = raw_dlt(src, dst)
     if np.allclose(H / H[2, 2], raw, rtol=1e-4, atol=1e-9 * np.abs(raw).max()):
         return ("; your H equals the DLT WITHOUT normalization: centre and scale both point sets first "
                 "(Hartley), then undo it as H = inv(T_dst) @ H_n @ T_src")
