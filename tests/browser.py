@@ -32,3 +32,20 @@ def chromium_path() -> str:
 def launch_chromium(playwright):
     """Launch headless Chromium with the flags this closed network needs; returns the Browser."""
     return playwright.chromium.launch(executable_path=chromium_path(), headless=True, args=CHROMIUM_ARGS)
+
+
+def wait_until_it_answers(url: str, proc, log_path, what: str, *, safety_s: float = 180.0) -> None:
+    """Wait until a server the test started answers ``url``; raise with the tail of its log when its process
+    ends first (or after ``safety_s``, a safety net only: no test asserts how long a start takes)."""
+    import time
+    import urllib.request
+
+    end = time.monotonic() + safety_s
+    while True:
+        try:
+            urllib.request.urlopen(url, timeout=2).read()
+            return
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > end:
+                raise RuntimeError(f"{what} did not start: {log_path.read_text()[-3000:]}") from None
+            time.sleep(0.5)

@@ -22,13 +22,12 @@ import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from browser import in_ci, launch_chromium
+from browser import in_ci, launch_chromium, wait_until_it_answers
 from dtscal_lib import calib_files, datasets, ground
 
 pytestmark = pytest.mark.slow
@@ -101,16 +100,7 @@ def jupyterlab(tmp_path: Path):
         cwd=root, env=env, stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
     try:
-        end = time.monotonic() + 120
-        while True:
-            try:
-                urllib.request.urlopen(f"{url}/api/status?token={token}", timeout=2).read()
-                break
-            except OSError:
-                if proc.poll() is not None or time.monotonic() > end:
-                    log.flush()
-                    raise RuntimeError(f"JupyterLab did not start: {(tmp_path / 'jupyterlab.log').read_text()[-2000:]}")
-                time.sleep(0.5)
+        wait_until_it_answers(f"{url}/api/status?token={token}", proc, tmp_path / "jupyterlab.log", "JupyterLab")
         yield url, token, root
     finally:
         proc.terminate()

@@ -31,7 +31,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-from browser import launch_chromium
+from browser import launch_chromium, wait_until_it_answers
 from ci import missing
 
 from nbtools import ROOT
@@ -149,16 +149,8 @@ c.Spawner.http_timeout = 300
                             cwd=tmp, env=clean, stdout=log, stderr=subprocess.STDOUT)
     url = f"http://127.0.0.1:{port}"
     try:
-        end = time.monotonic() + 180
-        while True:
-            try:
-                urllib.request.urlopen(f"{url}/hub/api/", timeout=2).read()
-                break
-            except OSError:
-                if proc.poll() is not None or time.monotonic() > end:
-                    log.flush()
-                    raise RuntimeError(f"JupyterHub did not start: {(tmp / 'hub.log').read_text()[-3000:]}")
-                time.sleep(0.5)
+        log.flush()
+        wait_until_it_answers(f"{url}/hub/api/", proc, tmp / "hub.log", "JupyterHub")
         yield {"url": url, "env": env, "repo": repo, "home": homes / USER, "tmp": tmp}
     finally:
         proc.terminate()

@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import ast
 import subprocess
 import sys
 import threading
@@ -359,24 +358,3 @@ def test_the_walk_to_the_robot_over_ros_goes_through_the_session(short_bag, tmp_
 
     for walk in (cli_walk, live_walk):
         check_walk(walk, ["detect", "calibration", "judge", "files", "robot"], ROBOT_STEPS)
-
-
-# --------------------------------------------------------------------------- layers
-def _imports(path: Path) -> set[str]:
-    tree = ast.parse(path.read_text(encoding="utf-8"))
-    package = ".".join(path.relative_to(LIB.parent).with_suffix("").parts[:-1])
-    out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom):
-            base = package.split(".")
-            if node.level:
-                base = base[: len(base) - node.level + 1]
-                name = ".".join(base + ([node.module] if node.module else []))
-            else:
-                name = node.module or ""
-            out.add(name)
-            out.update(f"{name}.{a.name}" for a in node.names)
-        elif isinstance(node, ast.Import):
-            out.update(a.name for a in node.names)
-    return out
-
