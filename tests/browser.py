@@ -49,3 +49,17 @@ def wait_until_it_answers(url: str, proc, log_path, what: str, *, safety_s: floa
             if proc.poll() is not None or time.monotonic() > end:
                 raise RuntimeError(f"{what} did not start: {log_path.read_text()[-3000:]}") from None
             time.sleep(0.5)
+
+
+def open_notebook(page, url: str, *, timeout_ms: int = 120_000, dialog_ms: int = 15_000) -> None:
+    """Open a notebook in JupyterLab and wait until its kernel is idle; a fresh JupyterLab may ask once which
+    kernel to use (the dialog's Select is clicked). The timeouts are safety nets, not assertions."""
+    page.goto(url)
+    page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=timeout_ms)
+    select = page.locator(".jp-Dialog button", has_text="Select")
+    try:
+        select.wait_for(timeout=dialog_ms)
+        select.click()
+    except Exception:  # no dialog: the kernel was chosen already
+        pass
+    page.wait_for_selector("#jp-main-statusbar :text('Idle')", timeout=timeout_ms)

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser import in_ci, launch_chromium, wait_until_it_answers
+from browser import in_ci, launch_chromium, open_notebook, wait_until_it_answers
 from dtscal_lib import calib_files, datasets, ground
 
 pytestmark = pytest.mark.slow
@@ -127,15 +127,7 @@ def _drive_notebook_06(url: str, token: str, shots: Path, calib_dir: Path) -> li
         browser = launch_chromium(p)
         page = browser.new_page(viewport={"width": 1400, "height": 1000})
         try:
-            page.goto(f"{url}/lab/tree/{NOTEBOOK.name}?token={token}")
-            page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=120_000)
-            select = page.locator(".jp-Dialog button", has_text="Select")
-            try:  # a fresh JupyterLab may ask for the kernel once
-                select.wait_for(timeout=15_000)
-                select.click()
-            except Exception:
-                pass
-            page.wait_for_selector("#jp-main-statusbar :text('Idle')", timeout=120_000)
+            open_notebook(page, f"{url}/lab/tree/{NOTEBOOK.name}?token={token}")
             page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
             page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
             # the calibrator's image arrives, then its bars fill from the recording; the latency is

@@ -31,7 +31,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-from browser import launch_chromium, wait_until_it_answers
+from browser import launch_chromium, open_notebook, wait_until_it_answers
 from ci import missing
 
 from nbtools import ROOT
@@ -179,15 +179,7 @@ def test_the_installed_kit_finds_its_recording_without_a_checkout(hub, tmp_path)
 
 
 def _open(page, url):
-    page.goto(url)
-    page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=240_000)
-    select = page.locator(".jp-Dialog button", has_text="Select")
-    try:  # a fresh JupyterLab may ask for the kernel once
-        select.wait_for(timeout=10_000)
-        select.click()
-    except Exception:
-        pass
-    page.wait_for_selector("#jp-main-statusbar :text('Idle')", timeout=240_000)
+    open_notebook(page, url, timeout_ms=240_000, dialog_ms=10_000)  # the single-user server starts first
 
 
 def _run_all_and_save(page):
