@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from drawn_ground import draw_ground
 import yaml
 
 REF = Path(__file__).resolve().parents[1] / "data" / "duckietown" / "dd24"
@@ -50,23 +51,16 @@ def ground_to_camera():
 
 def dd24_frame(scale: int = 2, supersample: int = 2) -> np.ndarray:
     """The raw (distorted) portrait frame, 480x640 grey, of the DD24 board lying at its place."""
-    K, D, (w, h) = reference_camera()
-    Ks = K * scale
-    Ks[2, 2] = 1.0
-    W, H, s = w * scale, h * scale, supersample
-    v, u = np.mgrid[0:H * s, 0:W * s]
-    pix = np.column_stack([(u.ravel() + 0.5) / s - 0.5, (v.ravel() + 0.5) / s - 0.5]).astype(np.float64)
-    rays = cv2.undistortPoints(pix.reshape(-1, 1, 2), Ks, D).reshape(-1, 2)
-    g = np.column_stack([rays, np.ones(len(rays))]) @ np.linalg.inv(ground_to_camera()).T
-    front = g[:, 2] > 0
-    gx, gy = g[:, 0] / g[:, 2], g[:, 1] / g[:, 2]
-    i, j = np.floor((gx - OUTER_X) / SQUARE), np.floor((gy - OUTER_Y) / SQUARE)
-    on_board = (i >= 0) & (i < 6) & (j >= 0) & (j < 8)
-    paper = (gx > OUTER_X - 0.02) & (gx < OUTER_X + 6 * SQUARE + 0.02) & (np.abs(gy - OUTER_Y - 4 * SQUARE) < 0.09)
-    grey = np.where(on_board, np.where((i + j) % 2 == 0, 235.0, 25.0), np.where(paper, 235.0, 100.0))
-    grey = np.where(front, grey, 100.0).reshape(H, s, W, s).mean(axis=(1, 3))
-    grey += np.random.default_rng(24).normal(0.0, 2.0, grey.shape)
-    return np.clip(np.rint(grey), 0, 255).astype(np.uint8)
+    K, D, size = reference_camera()
+
+    def paint(gx, gy):
+        i, j = np.floor((gx - OUTER_X) / SQUARE), np.floor((gy - OUTER_Y) / SQUARE)
+        on_board = (i >= 0) & (i < 6) & (j >= 0) & (j < 8)
+        paper = ((gx > OUTER_X - 0.02) & (gx < OUTER_X + 6 * SQUARE + 0.02)
+                 & (np.abs(gy - OUTER_Y - 4 * SQUARE) < 0.09))
+        return np.where(on_board, np.where((i + j) % 2 == 0, 235.0, 25.0), np.where(paper, 235.0, 100.0))
+
+    return draw_ground(K, D, size, np.linalg.inv(ground_to_camera()), paint, scale=scale, supersample=supersample)
 
 
 def dtscal(*args) -> subprocess.CompletedProcess:

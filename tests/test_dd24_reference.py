@@ -31,6 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from drawn_ground import draw_ground
 import yaml
 
 REF = Path(__file__).resolve().parents[1] / "data" / "duckietown" / "dd24"
@@ -115,25 +116,16 @@ def test_the_kit_reads_the_reference_as_duckietown_wrote_it(tmp_path):
 
 def reference_frame(scale: int = 2, supersample: int = 2) -> np.ndarray:
     """The raw portrait frame (480x640 grey) of the DD24 board seen from the reference file's camera pose."""
-    F, K, D, (w, h) = reference()
-    to_board = np.linalg.inv(board_to_camera(F))
-    Ks = K * scale
-    Ks[2, 2] = 1.0
-    W, H, s = w * scale, h * scale, supersample
-    v, u = np.mgrid[0:H * s, 0:W * s]
-    pix = np.column_stack([(u.ravel() + 0.5) / s - 0.5, (v.ravel() + 0.5) / s - 0.5]).astype(np.float64)
-    rays = cv2.undistortPoints(pix.reshape(-1, 1, 2), Ks, D).reshape(-1, 2)
-    g = np.column_stack([rays, np.ones(len(rays))]) @ to_board.T
-    front = g[:, 2] > 0  # the ray meets the ground ahead of the camera
-    gx, gy = g[:, 0] / g[:, 2], g[:, 1] / g[:, 2]
-    a, c = np.floor(gx / SQUARE) + 1, np.floor(gy / SQUARE) + 1  # squares around the inner-corner grid
-    on_board = (a >= 0) & (a < COLS + 1) & (c >= 0) & (c < ROWS + 1)
-    margin = SQUARE + 0.015
-    paper = (gx > -margin) & (gx < COLS * SQUARE + 0.015) & (gy > -margin) & (gy < ROWS * SQUARE + 0.015)
-    grey = np.where(on_board, np.where((a + c) % 2 == 0, 235.0, 25.0), np.where(paper, 235.0, 100.0))
-    grey = np.where(front, grey, 100.0).reshape(H, s, W, s).mean(axis=(1, 3))
-    grey += np.random.default_rng(24).normal(0.0, 2.0, grey.shape)
-    return np.clip(np.rint(grey), 0, 255).astype(np.uint8)
+    F, K, D, size = reference()
+
+    def paint(gx, gy):
+        a, c = np.floor(gx / SQUARE) + 1, np.floor(gy / SQUARE) + 1  # squares around the inner-corner grid
+        on_board = (a >= 0) & (a < COLS + 1) & (c >= 0) & (c < ROWS + 1)
+        margin = SQUARE + 0.015
+        paper = (gx > -margin) & (gx < COLS * SQUARE + 0.015) & (gy > -margin) & (gy < ROWS * SQUARE + 0.015)
+        return np.where(on_board, np.where((a + c) % 2 == 0, 235.0, 25.0), np.where(paper, 235.0, 100.0))
+
+    return draw_ground(K, D, size, np.linalg.inv(board_to_camera(F)), paint, scale=scale, supersample=supersample)
 
 
 def test_a_frame_at_the_reference_pose_calibrates_and_agrees_with_the_reference(tmp_path):
