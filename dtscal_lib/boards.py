@@ -78,6 +78,86 @@ class Board:
         return f"{self.cols}x{self.rows} inner corners, {self.square * 1000:g} mm squares"
 
 
+
+#: ArUco dictionaries by the names ROS's ``cameracalibrator.py --aruco_dict`` takes (image_pipeline,
+#: camera_calibration/src/camera_calibration/calibrator.py, ``ChessboardInfo``), mapped to OpenCV's constants
+ARUCO_DICTIONARIES = {
+    "aruco_orig": "DICT_ARUCO_ORIGINAL",
+    **{f"{b}x{b}_{n}": f"DICT_{b}X{b}_{n}" for b in (4, 5, 6, 7) for n in (50, 100, 250, 1000)},
+}
+
+
+@dataclass(frozen=True)
+class CharucoBoard(Board):
+    """A ChArUco board: a chessboard whose white squares hold ArUco markers, so a part of it is enough.
+
+    Described as it is printed and sold (calib.io, OpenCV's ``CharucoBoard``, ROS's calibrator with
+    ``--pattern charuco``): ``squares_x`` by ``squares_y`` squares of side ``square``, markers of side
+    ``marker`` from the ArUco dictionary ``dictionary`` (ROS's names, :data:`ARUCO_DICTIONARIES`), and
+    ``legacy`` for boards laid out before OpenCV 4.6 (calib.io's "OpenCV <= 4.5" switch: with an even
+    number of rows the first marker then sits in the other corner square).
+
+    The chessboard's inner corners are the calibration points: ``cols = squares_x - 1`` by
+    ``rows = squares_y - 1``, numbered as OpenCV numbers them (ChArUco id ``k`` is row ``k // cols``,
+    column ``k % cols``), so :meth:`object_points` indexed by the detected ids gives each corner's board
+    coordinate. Unlike a chessboard, a view may hold any subset of them.
+
+    >>> b = CharucoBoard.from_squares(8, 6, 0.03, 0.022, "5x5_100")
+    >>> (b.cols, b.rows, b.n_corners)
+    (7, 5, 35)
+    """
+
+    marker: float = 0.0
+    dictionary: str = "5x5_100"
+    legacy: bool = False
+
+    @classmethod
+    def from_squares(cls, squares_x: int, squares_y: int, square: float, marker: float,
+                     dictionary: str = "5x5_100", legacy: bool = False) -> "CharucoBoard":
+        """The board as printed: squares across and down, square and marker sides (metres)."""
+        return cls(int(squares_x) - 1, int(squares_y) - 1, float(square), float(marker), str(dictionary),
+                   bool(legacy))
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.dictionary not in ARUCO_DICTIONARIES:
+            raise DtscalError(f"unknown ArUco dictionary {self.dictionary!r}; use one of ROS's names: "
+                              + ", ".join(ARUCO_DICTIONARIES) + " (printed on a calib.io board as e.g. DICT_5X5)")
+        if not (np.isfinite(self.marker) and 0 < self.marker < self.square):
+            raise DtscalError(f"the marker side must be positive and smaller than the square ({self.square:g}); "
+                              f"got {self.marker!r}: measure one ArUco marker's black border on the print")
+
+    @property
+    def squares(self) -> tuple[int, int]:
+        """``(squares_x, squares_y)``: the printed squares across and down."""
+        return (int(self.cols) + 1, int(self.rows) + 1)
+
+    def opencv_board(self):
+        """OpenCV's ``cv2.aruco.CharucoBoard`` of this board (legacy layout set when asked)."""
+        return _opencv_charuco(self.squares, float(self.square), float(self.marker), self.dictionary,
+                               bool(self.legacy))
+
+    def describe(self) -> str:
+        sx, sy = self.squares
+        return (f"ChArUco {sx}x{sy} squares ({self.cols}x{self.rows} inner corners), {self.square * 1000:g} mm "
+                f"squares, {self.marker * 1000:g} mm {self.dictionary} markers" + (", legacy layout" if self.legacy else ""))
+
+
+def _opencv_charuco(squares, square, marker, dictionary, legacy):
+    import cv2  # the board model stays importable without OpenCV's aruco module loaded
+
+    key = (tuple(squares), square, marker, dictionary, legacy)
+    board = _CHARUCO_CACHE.get(key)
+    if board is None:
+        d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICTIONARIES[dictionary]))
+        board = cv2.aruco.CharucoBoard(tuple(squares), square, marker, d)
+        board.setLegacyPattern(bool(legacy))
+        _CHARUCO_CACHE[key] = board
+    return board
+
+
+_CHARUCO_CACHE: dict = {}
+
 #: the Duckietown calibration board: 8x6 squares, 7x5 inner corners, 31 mm squares (``dts duckiebot
 #: calibrate_intrinsics`` runs ROS's calibrator with ``--size 7x5 --square 0.031``; lib-dt-computer-vision's
 #: boards.py ``CalibrationBoard8by6``)

@@ -35,9 +35,16 @@ EXIT_REFUSED = 3
 _FLAG_WORDING = {"topic=": "--topic", "keep_anyway=True": "--keep-anyway"}
 
 
-def _board(args):
-    from .validation import board_from_flags
+def _board(args, charuco_ok: bool = True):
+    from .validation import board_from_flags, charuco_from_flags
 
+    if getattr(args, "charuco", None):
+        if not charuco_ok:
+            from .errors import DtscalError
+
+            raise DtscalError("--charuco: the extrinsic calibration uses the printed chessboard on the ground "
+                              "(Duckietown's A3 pattern, or the DD24's); drop --charuco and pass --board/--square")
+        return charuco_from_flags(args.charuco, args.square, args.marker, args.aruco_dict, args.legacy)
     return board_from_flags(args.board, args.square)
 
 
@@ -167,7 +174,7 @@ def cmd_calibrate_extrinsics(args) -> int:
     from .pipeline import calibrate_extrinsics
 
     _master(args)
-    run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args), robot=args.robot,
+    run = calibrate_extrinsics(args.source, args.intrinsics, board=_board(args, charuco_ok=False), robot=args.robot,
                                out_dir=None if args.no_write else args.out, fmt=args.format,
                                topic=args.topic, progress=_progress(not args.quiet, "frames"),
                                keep_anyway=args.keep_anyway, max_seconds=args.max_seconds,
@@ -232,13 +239,13 @@ def cmd_compare(args) -> int:
 
 
 def cmd_synth(args) -> int:
-    from .synth import generate
+    from .synth import generate, generate_charuco
     from .validation import check_output_folder, check_seed
 
     seed = check_seed(args.seed)
     out = check_output_folder(args.out)
     try:
-        paths = generate(out, seed=seed, progress=not args.quiet)
+        paths = generate_charuco(out, seed=seed) if args.charuco else generate(out, seed=seed, progress=not args.quiet)
     except OSError as e:
         raise DtscalError(f"--out {args.out}: writing the session failed ({e}); free space or choose another "
                           "folder") from None
@@ -260,6 +267,13 @@ def build_parser() -> argparse.ArgumentParser:
     def board_args(sp):
         sp.add_argument("--board", default="7x5", help="inner corners CxR (default 7x5, the Duckietown board)")
         sp.add_argument("--square", type=float, default=0.031, help="square size in metres (default 0.031)")
+        sp.add_argument("--charuco", metavar="SXxSY", help="a ChArUco board of SX by SY squares (as printed and as ROS's "
+                        "calibrator takes it) instead of a chessboard; partial views count. With --square, --marker")
+        sp.add_argument("--marker", type=float, help="--charuco: side of one ArUco marker in metres")
+        sp.add_argument("--aruco-dict", default="4x4_50", help="--charuco: the markers' dictionary, ROS's names "
+                        "(aruco_orig, 4x4_50 ... 7x7_1000; default 4x4_50)")
+        sp.add_argument("--legacy", action="store_true", help="--charuco: a board laid out as OpenCV <= 4.5 did "
+                        "(calib.io's legacy switch; matters for an even number of rows)")
 
     def common(sp):
         sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images; live: "
@@ -318,6 +332,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("synth", help="regenerate the synthetic recorded Duckiebot session")
     sp.add_argument("--out", default="data", help="data folder (default ./data)")
     sp.add_argument("--seed", type=int, default=None, help="random seed (default: the one the shipped data used)")
+    sp.add_argument("--charuco", action="store_true", help="the ChArUco sweep instead (session/charuco.bag)")
     sp.add_argument("-q", "--quiet", action="store_true")
     sp.set_defaults(func=cmd_synth)
 

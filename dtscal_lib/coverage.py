@@ -71,14 +71,43 @@ def skew_angle(quad: np.ndarray) -> float:
     return float(math.acos(float(np.clip(np.dot(a, b) / (na * nb), -1.0, 1.0))))
 
 
-def board_params(corners, board: Board = DUCKIETOWN_BOARD, image_size=IMAGE_SIZE) -> np.ndarray:
+def largest_rectangle(ids, board: Board) -> tuple[int, int, int, int]:
+    """Ids ``(up_left, up_right, down_right, down_left)`` of the largest grid rectangle whose four corners a
+    partial ChArUco view holds: ROS's ``_get_largest_rectangle_corners`` (image_pipeline, calibrator.py), which
+    stands in for the outer corners in the X / Y / Size / Skew parameters of a partial view.
+
+    >>> from dtscal_lib.boards import CharucoBoard
+    >>> b = CharucoBoard.from_squares(5, 4, 0.04, 0.03, "4x4_50")   # 4x3 inner corners, ids 0..11
+    >>> largest_rectangle([0, 1, 2, 4, 5, 6, 9, 10], b)
+    (0, 2, 6, 4)
+    """
+    seen = {int(i) for i in np.asarray(ids).ravel()}
+    best, best_area = None, 0
+    for x1 in range(board.cols):  # a rectangle spans two columns and two rows (ROS's allows one: a line)
+        for x2 in range(x1 + 1, board.cols):
+            for y1 in range(board.rows):
+                for y2 in range(y1 + 1, board.rows):
+                    quad = (y1 * board.cols + x1, y1 * board.cols + x2, y2 * board.cols + x2, y2 * board.cols + x1)
+                    area = (x2 - x1 + 1) * (y2 - y1 + 1)
+                    if area > best_area and all(q in seen for q in quad):
+                        best, best_area = quad, area
+    if best is None:
+        raise DtscalError("no four corners of a rectangle of the board are among the ChArUco corners seen; "
+                          "such a view gives no X / Y / Size / Skew: hold more of the board in view")
+    return best
+
+
+def board_params(corners, board: Board = DUCKIETOWN_BOARD, image_size=IMAGE_SIZE, ids=None) -> np.ndarray:
     """ROS's per-detection parameters ``[X, Y, Size, Skew]``.
 
     Parameters
     ----------
-    corners : (N, 2) float pixels, board row-major order (N = board.n_corners)
+    corners : (N, 2) float pixels, board row-major order (N = board.n_corners), or the corners of a partial
+        ChArUco view with their ``ids``
     board : Board
     image_size : (w, h)
+    ids : (N,) ids of a ChArUco view's corners: the quadrilateral is then the largest rectangle of corners
+        seen (:func:`largest_rectangle`, ROS's rule for partial views), X and Y the mean of the corners seen
 
     Returns
     -------
@@ -102,8 +131,15 @@ def board_params(corners, board: Board = DUCKIETOWN_BOARD, image_size=IMAGE_SIZE
     [0.5, 0.5, 0.072, 0.0]
     """
     w, h = as_size(image_size, name="image_size")
-    c = _as_corners(corners, board)
-    quad = c[list(board.outer_corner_indices())]
+    if ids is None:
+        c = _as_corners(corners, board)
+        quad = c[list(board.outer_corner_indices())]
+    else:
+        c = as_points(corners, 2, "corners")
+        where = {int(k): n for n, k in enumerate(np.asarray(ids).ravel())}
+        if len(where) != len(c):
+            raise DtscalError(f"got {len(c)} corners but {len(where)} distinct ids; pass one id per corner")
+        quad = c[[where[k] for k in largest_rectangle(ids, board)]]
     area = quad_area(quad)
     skew = min(1.0, 2.0 * abs(math.pi / 2.0 - skew_angle(quad)))
     border = math.sqrt(area)
@@ -127,11 +163,13 @@ def param_distance(p1, p2) -> float:
 # --------------------------------------------------------------------------- the tracker
 @dataclass(frozen=True)
 class Sample:
-    """One stored detection: ``corners`` (N, 2) float64 pixels, ``params`` (4,) [X, Y, Size, Skew]."""
+    """One stored detection: ``corners`` (N, 2) float64 pixels, ``params`` (4,) [X, Y, Size, Skew];
+    ``ids`` (N,) for a ChArUco view (its corners' ids), None for a whole chessboard."""
 
     corners: np.ndarray
     params: np.ndarray
     frame_index: int
+    ids: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -205,12 +243,13 @@ class CoverageTracker:
         corners = self._corners_of(detection_or_corners)
         if corners is None:
             return False
-        params = board_params(corners, self.board, self.image_size)
+        ids = getattr(detection_or_corners, "ids", None)
+        params = board_params(corners, self.board, self.image_size, ids=ids)
         if self.samples:
             nearest = min(param_distance(params, s.params) for s in self.samples)
             if nearest <= self.min_distance:
                 return False
-        self.samples.append(Sample(corners.copy(), params, index))
+        self.samples.append(Sample(corners.copy(), params, index, None if ids is None else np.array(ids)))
         return True
 
     def _corners_of(self, item) -> np.ndarray | None:
@@ -228,6 +267,8 @@ class CoverageTracker:
                     f"the detection comes from a {size[0]}x{size[1]} image but the tracker expects "
                     f"{self.image_size[0]}x{self.image_size[1]}; resize frames to one size per session"
                 )
+            if getattr(item, "ids", None) is not None:  # a partial ChArUco view
+                return as_points(item.corners, 2, "corners")
             return _as_corners(item.corners, self.board)
         return _as_corners(item, self.board)
 
@@ -271,7 +312,8 @@ class CoverageTracker:
         image_points : list of (N, 2) float64 pixels (one per sample)
         """
         obj = self.board.object_points()
-        return [obj.copy() for _ in self.samples], [s.corners.copy() for s in self.samples]
+        return ([obj.copy() if s.ids is None else obj[s.ids] for s in self.samples],
+                [s.corners.copy() for s in self.samples])
 
     def reset(self) -> None:
         """Forget all samples (start a new session)."""

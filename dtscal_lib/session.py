@@ -374,7 +374,8 @@ class IntrinsicSession:
                     group.tally.reject(Reason.NOT_NEW_COVERAGE)
                 return Offer(added, None if added else Reason.NOT_NEW_COVERAGE, det, img)
             group.tracker.offer(det)  # keeps the bars meaningful for stills too
-            group.obj.append(self.board.object_points())
+            obj = self.board.object_points()
+            group.obj.append(obj if det.ids is None else obj[det.ids])  # a ChArUco view: the corners seen
             group.img.append(det.corners)
             group.tally.used += 1
             return Offer(True, None, det, img)

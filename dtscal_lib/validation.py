@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .boards import Board, parse_board
+from .boards import Board, CharucoBoard, parse_board
 from .errors import DtscalError
 
 __all__ = ["IMAGE_SIDE_RANGE", "MAX_CORNERS", "MIN_CORNERS", "SQUARE_RANGE_M", "board_from_flags", "check_board",
@@ -78,6 +78,23 @@ def board_from_flags(spec: str, square: float) -> Board:
     except DtscalError as e:
         raise DtscalError(f"--board {spec}: {e}") from None
     return check_board(board)
+
+
+def charuco_from_flags(squares: str, square: float, marker, dictionary: str, legacy: bool) -> CharucoBoard:
+    """The board of ``--charuco SXxSY --square S --marker M --aruco-dict D [--legacy]``, checked."""
+
+    try:
+        sx, sy = parse_board(squares, 1.0).pattern_size
+    except DtscalError:
+        raise DtscalError(f"--charuco {squares}: give the printed squares as SXxSY, e.g. --charuco 8x6") from None
+    if marker is None:
+        raise DtscalError("--charuco needs --marker: the side of one ArUco marker in metres (measure its black "
+                          "border on the print; calib.io prints it on the board)")
+    board_from_flags(f"{sx - 1}x{sy - 1}", square)  # the same limits as a chessboard's inner corners and squares
+    try:
+        return CharucoBoard.from_squares(sx, sy, square, float(marker), dictionary, legacy)
+    except DtscalError as e:
+        raise DtscalError(f"--charuco {squares}: {e}") from None
 
 
 def check_image_size(size, *, name: str = "image_size", hint: str = "") -> tuple[int, int]:

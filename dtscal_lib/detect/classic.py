@@ -8,10 +8,11 @@ import dataclasses
 import cv2
 import numpy as np
 
-from ..boards import DUCKIETOWN_BOARD, Board
+from ..boards import DUCKIETOWN_BOARD, Board, CharucoBoard
 from ..duckietown import BORDER_MARGIN_PX
 from ..errors import DtscalError
 from ..limits import SMOOTH_GRID_TOLERANCE
+from .charuco import detect_charuco
 from .frame import REASON_AT_BORDER, REASON_INCONSISTENT, REASON_NO_BOARD, Detection, to_gray
 from .grid import _local_square, grid_jump, grid_rejection, grid_residuals, grid_tolerance
 from .lattice import _saddle_lattice
@@ -100,6 +101,8 @@ def detect_board(image, board: Board = DUCKIETOWN_BOARD, *,
     >>> detect_board(np.zeros((480, 640), np.uint8)).reason
     'no_board'
     """
+    if isinstance(board, CharucoBoard):  # OpenCV's ChArUco detector: partial views, no border rule (ROS's)
+        return detect_charuco(image, board)
     _check_inputs(board, border_margin)
     gray = to_gray(image)
     return _detect_in_regions(gray, board, border_margin, live=True)
@@ -217,7 +220,7 @@ def detect_board_still(image, board: Board = DUCKIETOWN_BOARD, *,
     few hundred ms); meant for the extrinsic capture and for notebooks.
     """
     det = detect_board(image, board, border_margin=border_margin)
-    if det.found or det.reason == REASON_AT_BORDER:
+    if det.found or det.reason == REASON_AT_BORDER or isinstance(board, CharucoBoard):
         return det
     gray = to_gray(image)
     thorough = _detect_in_regions(gray, board, border_margin, live=False)

@@ -52,6 +52,9 @@ class Detection:
     #: ``(cols, rows)`` of inner corners when the saddles show the pattern continuing past the declared board's
     #: corners (a bigger board declared too small: a sub-grid was found), else None
     pattern_seen: tuple[int, int] | None = None
+    #: a ChArUco board's view: the id of each corner (:class:`~dtscal_lib.boards.CharucoBoard`'s numbering,
+    #: ``corners`` then holds only the corners seen, in this order); None for a chessboard (all corners)
+    ids: np.ndarray | None = None
 
     def __bool__(self) -> bool:
         return self.found
@@ -144,7 +147,10 @@ def draw_detection(image, detection: Detection) -> np.ndarray:
     (h, w, 3) uint8 BGR
     """
     out = _as_bgr(image)
-    if detection.corners is not None:
+    if detection.corners is not None and detection.ids is not None:  # a partial ChArUco view: its corners, ids
+        pts = np.asarray(detection.corners, dtype=np.float32).reshape(-1, 1, 2)
+        cv2.aruco.drawDetectedCornersCharuco(out, pts, np.asarray(detection.ids, np.int32).reshape(-1, 1))
+    elif detection.corners is not None:
         pts = np.asarray(detection.corners, dtype=np.float32).reshape(-1, 1, 2)
         cv2.drawChessboardCorners(out, detection.board.pattern_size, pts, bool(detection.found))
     return out

@@ -289,9 +289,15 @@ def _polish(gray: np.ndarray, corners: np.ndarray, board: Board, skip, sigma):
     c = np.asarray(corners, dtype=np.float64).reshape(-1, 2).copy()
     if sigma <= 0:
         return c, np.zeros(len(c), dtype=bool)
-    radius = corner_windows(c, board, margin=WINDOW_MARGIN_PX + sigma)
+    return _polish_points(gray, c, corner_windows(c, board, margin=WINDOW_MARGIN_PX + sigma), skip, sigma)
+
+
+def _polish_points(gray: np.ndarray, corners: np.ndarray, radius: np.ndarray, skip=None, sigma=None):
+    """The polish of :func:`polish_corners` with the windows given: (corners, (N,) bool: polished)."""
+    sigma = REFINE_SIGMA if sigma is None else float(sigma)
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 2).copy()
     # cornerSubPix reads 1 px beyond its window, bilinearly: the smoothing must be exact that far
-    img = refine_image(gray, c, float(radius.max(initial=0)) + 3.0, sigma)
+    img = refine_image(gray, c, float(np.max(radius, initial=0)) + 3.0, sigma)
     p = _subpix(img, c, radius)
     use = np.linalg.norm(p - c, axis=1) < POLISH_MAX_MOVE_PX
     if skip is not None:

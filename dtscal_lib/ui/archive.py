@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import calib_files
-from ..boards import Board
+from ..boards import Board, CharucoBoard
 from ..coverage import Sample
 from ..errors import DtscalError
 
@@ -50,13 +50,17 @@ def save_session(path, *, board: Board, image_size, robot: str, samples, calibra
         path = path.with_suffix(".zip")
     robot = calib_files.check_robot_name(robot)
     n = len(samples)
-    corners = np.array([s.corners for s in samples], dtype=np.float64).reshape(n, board.n_corners, 2)
+    corners = np.full((n, board.n_corners, 2), np.nan)  # a ChArUco view: NaN where a corner was not seen
+    for i, s in enumerate(samples):
+        corners[i, slice(None) if s.ids is None else s.ids] = np.asarray(s.corners, dtype=np.float64).reshape(-1, 2)
     params = np.array([s.params for s in samples], dtype=np.float64).reshape(n, 4)
     index = np.array([s.frame_index for s in samples], dtype=np.int64).reshape(n)
     buf = io.BytesIO()
     np.savez_compressed(buf, corners=corners, params=params, frame_index=index)
     meta = {"format": FORMAT, "version": VERSION, "robot": robot, "n_samples": n,
-            "board": {"cols": board.cols, "rows": board.rows, "square": board.square},
+            "board": {"cols": board.cols, "rows": board.rows, "square": board.square,
+                      **({"charuco": {"marker": board.marker, "dictionary": board.dictionary, "legacy": board.legacy}}
+                         if isinstance(board, CharucoBoard) else {})},
             "image_size": [int(image_size[0]), int(image_size[1])],
             "calibration": f"camera_intrinsic/{robot}.yaml" if calibration is not None else None}
     try:
@@ -108,6 +112,10 @@ def load_session(path) -> SessionArchive:
             try:
                 b = meta["board"]
                 board = Board(int(b["cols"]), int(b["rows"]), float(b["square"]))
+                if b.get("charuco") is not None:
+                    c = b["charuco"]
+                    board = CharucoBoard(board.cols, board.rows, board.square, float(c["marker"]),
+                                         str(c["dictionary"]), bool(c["legacy"]))
                 size = (int(meta["image_size"][0]), int(meta["image_size"][1]))
                 robot = calib_files.check_robot_name(str(meta["robot"]))
             except (KeyError, TypeError, ValueError, IndexError) as exc:
@@ -118,8 +126,10 @@ def load_session(path) -> SessionArchive:
             except (ValueError, KeyError, OSError) as exc:
                 raise DtscalError(f"{where}: samples.npz cannot be read ({exc})") from None
             n = len(index)
+            seen = np.isfinite(corners).all(axis=-1) if corners.ndim == 3 else None
+            partial = isinstance(board, CharucoBoard)
             if corners.shape != (n, board.n_corners, 2) or params.shape != (n, 4) or not (
-                    np.all(np.isfinite(corners)) and np.all(np.isfinite(params))):
+                    (partial or np.all(seen)) and np.all(np.isfinite(params))):
                 raise DtscalError(f"{where}: samples.npz has inconsistent shapes or non-finite values")
             calib = None
             if meta.get("calibration"):
@@ -132,5 +142,9 @@ def load_session(path) -> SessionArchive:
                         raise DtscalError(f"{where}: its calibration file is invalid: {exc}") from None
     except zipfile.BadZipFile:
         raise DtscalError(f"{where}: not a zip file; pass the .zip written by SAVE") from None
-    samples = [Sample(corners[i].copy(), params[i].copy(), int(index[i])) for i in range(n)]
+    if isinstance(board, CharucoBoard):
+        samples = [Sample(corners[i][seen[i]].copy(), params[i].copy(), int(index[i]), np.flatnonzero(seen[i]))
+                   for i in range(n)]
+    else:
+        samples = [Sample(corners[i].copy(), params[i].copy(), int(index[i])) for i in range(n)]
     return SessionArchive(board, size, robot, samples, calib)
