@@ -140,7 +140,8 @@ class CharucoBoard(Board):
     def describe(self) -> str:
         sx, sy = self.squares
         return (f"ChArUco {sx}x{sy} squares ({self.cols}x{self.rows} inner corners), {self.square * 1000:g} mm "
-                f"squares, {self.marker * 1000:g} mm {self.dictionary} markers" + (", legacy layout" if self.legacy else ""))
+                f"squares, {self.marker * 1000:g} mm {self.dictionary} markers"
+                + (", legacy layout" if self.legacy else ""))
 
 
 def _opencv_charuco(squares, square, marker, dictionary, legacy):

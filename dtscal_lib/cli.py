@@ -267,8 +267,9 @@ def build_parser() -> argparse.ArgumentParser:
     def board_args(sp):
         sp.add_argument("--board", default="7x5", help="inner corners CxR (default 7x5, the Duckietown board)")
         sp.add_argument("--square", type=float, default=0.031, help="square size in metres (default 0.031)")
-        sp.add_argument("--charuco", metavar="SXxSY", help="a ChArUco board of SX by SY squares (as printed and as ROS's "
-                        "calibrator takes it) instead of a chessboard; partial views count. With --square, --marker")
+        sp.add_argument("--charuco", metavar="SXxSY",
+                        help="a ChArUco board of SX by SY squares (as printed and as ROS's calibrator takes it)"
+                             " instead of a chessboard; partial views count. With --square, --marker")
         sp.add_argument("--marker", type=float, help="--charuco: side of one ArUco marker in metres")
         sp.add_argument("--aruco-dict", default="4x4_50", help="--charuco: the markers' dictionary, ROS's names "
                         "(aruco_orig, 4x4_50 ... 7x7_1000; default 4x4_50)")

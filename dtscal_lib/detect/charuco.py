@@ -14,16 +14,20 @@ OpenCV's corners are not used as they come. ``detectBoard`` of OpenCV 4.7-4.12 r
 shifted by +0.5 px (it moves the start by -0.5 px before ``cornerSubPix`` and adds 0.5 px after it:
 opencv/opencv issue #25539, fixed by pull request #28380 in January 2026), and its refinement windows may
 reach the markers' edges, which pull a corner the way a printed outline pulls a chessboard corner. The kit
-measures OpenCV's offset once on a board OpenCV draws itself (:func:`opencv_offset`: +0.50 px with the pinned
-4.12, 0 once fixed), removes it, and refines each corner again like a chessboard corner
-(:func:`charuco_windows`: the window stays inside the square around the corner that no marker reaches, then
-the kit's polish on the smoothed image). Measured on the 33 rendered views of the sweep with a 45 mm board,
-the corners' error is 0.066 px rms with 27 mm markers (0.6 of the square; p99 0.16 px, the chessboard's
-0.03-0.05 px) but 0.158 px rms with 34 mm markers (0.76; 17 of 1072 corners off by more than 0.5 px): the
-thinner the white margin around the markers, the smaller each corner's window (``benchmarks/bench_charuco.py``).
+refines each corner again like a chessboard corner (:func:`charuco_windows`: the window stays inside the
+square around the corner that no marker reaches, then the kit's polish on the smoothed image), starting from
+OpenCV's corner less OpenCV's offset, measured once on a board OpenCV draws itself (:func:`opencv_offset`:
++0.49 px with the pinned 4.12, 0 once fixed). The refinement alone removes the bias; the measured offset
+only gives it a closer start (0.071 against 0.073 px rms on the sweep below).
 
-A view whose corners all lie on one line of the board (one row or one column) cannot
-give a plane-to-image homography: it is refused here, named, rather than by the calibration later.
+Measured on the 33 views of the rendered sweep (a 45 mm board, ``benchmarks/bench_charuco.py``), the
+corners' error is 0.071 px rms with 27 mm markers (0.6 of the square; p99 0.15 px; the kit's chessboard
+corners on the same poses: 0.03-0.05 px) but 0.160 px rms with 34 mm markers (0.76; 17 of 1072 corners off
+by more than 0.5 px): the thinner the white margin around the markers, the smaller each corner's window.
+
+A view without four corners spanning a rectangle of the board (two rows and two columns) gives neither a
+reliable homography nor ROS's coverage parameters (:func:`~dtscal_lib.coverage.largest_rectangle`): it is
+refused here, named, rather than by the calibration later.
 """
 
 from __future__ import annotations
