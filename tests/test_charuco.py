@@ -14,6 +14,7 @@ import itertools
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -191,17 +192,73 @@ def test_cli_calibrates_the_charuco_recording(recording_run):
     assert res["quality"]["verdict"] == "good"
     # partial views were used: some views hold fewer corners than the board has
     assert res["n_points"] < res["n_views"] * 35
-    assert (out / "camera_intrinsic").is_dir()
+    written = out / "camera_intrinsic" / "synthbot.yaml"
+    assert written.is_file()
 
 
-def test_opencv_calibrates_the_same_corners_alike():
-    """The kit's solver against OpenCV's on the kit's ChArUco corners, each matched to the board by OpenCV."""
-    from dtscal_lib.pipeline import calibrate_intrinsics
+def test_compare_judges_the_charuco_file_against_the_camera(recording_run, tmp_path, capsys):
+    """``dtscal compare`` on the ChArUco calibration and the rendering camera's own file."""
+    from dtscal_lib import calib_files
+    from dtscal_lib.camera import CameraModel
+    from dtscal_lib.cli import main
+    from dtscal_lib.session import intrinsic_file
 
+    run, truth, out = recording_run
+    cam = truth["camera"]
+    true_cam = CameraModel(np.array(cam["K"]), np.array(cam["dist"]), (cam["image_width"], cam["image_height"]),
+                           cam["distortion_model"])
+    calib_files.save_intrinsics(intrinsic_file(true_cam, "truth"), tmp_path, "truth")
+    assert main(["compare", str(tmp_path / "camera_intrinsic" / "truth.yaml"),
+                 str(out / "camera_intrinsic" / "synthbot.yaml"), "--json"]) == 0
+    comp = json.loads(capsys.readouterr().out)
+    # mrcal's projection difference over the image: well under a pixel where the corners reached
+    assert comp["rms_px"] < 0.5, comp["rms_px"]
+
+
+@pytest.fixture(scope="module")
+def live():
+    """Notebook 06's live calibrator on the ChArUco recording (stepped frame by frame, no thread)."""
+    from dtscal_lib.sources import open_source
+    from dtscal_lib.synth import CHARUCO_BOARD
+    from dtscal_lib.ui import LiveCalibrator
+
+    app = LiveCalibrator(str(SESSION / "charuco.bag"), board=CHARUCO_BOARD, autostart=False)
+    for f in open_source(SESSION / "charuco.bag"):
+        if f.ok:
+            app.loop.step(f)
+    yield app
+    app.close()
+
+
+def test_live_calibrator_bars_calibrate_and_commit(live, tmp_path):
+    from dtscal_lib import calib_files
+
+    assert live.bars.value.count('data-full="1"') == 4 and not live.calibrate_button.disabled
+    assert not live.loop.errors, live.loop.last_error
+    assert any(s.ids is not None and len(s.ids) < 35 for s in live.samples)  # partial views became samples
+    live.calibrate_button.click()
+    end = time.monotonic() + 300
+    while (live.calibrating or live.result is None) and time.monotonic() < end:
+        time.sleep(0.05)
     truth = yaml.safe_load((SESSION / "charuco.yaml").read_text())
-    tb = truth["board"]
-    board = CharucoBoard.from_squares(*tb["squares"], tb["square"], tb["marker"], tb["dictionary"], tb["legacy"])
-    res = calibrate_intrinsics(str(SESSION / "charuco.bag"), board=board).result
+    K = np.array(truth["camera"]["K"])
+    assert abs(live.result.K[0, 0] / K[0, 0] - 1) < 1e-3 and abs(live.result.K[1, 1] / K[1, 1] - 1) < 1e-3
+    live.folder_text.value = str(tmp_path)
+    live.commit_button.click()
+    written = calib_files.load_intrinsics(tmp_path / "camera_intrinsic" / "synthbot.yaml")
+    np.testing.assert_allclose(written.K, live.result.K)
+
+
+def test_opencv_calibrates_the_same_corners_alike(live):
+    """The kit's solver against OpenCV's on the kit's ChArUco corners, each matched to the board by OpenCV."""
+    from dtscal_lib.synth import CHARUCO_BOARD as board
+
+    if live.result is None:
+        live.calibrate_button.click()
+        end = time.monotonic() + 300
+        while (live.calibrating or live.result is None) and time.monotonic() < end:
+            time.sleep(0.05)
+    res = live.result
     objs, imgs = [], []
     for o, p in zip(res.object_points, res.image_points):
         col, row = np.rint(np.asarray(o)[:, :2] / board.square).astype(int).T
