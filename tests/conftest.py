@@ -28,6 +28,7 @@ LONGEST_FIRST = (
     "test_nbgrader_export.py",
     "test_outputs_portable.py", "test_report.py", "test_quality.py",
     "test_live_sources.py", "test_grading_sandbox.py", "test_notebook_text.py", "test_ui_calibrator.py",
+    "test_charuco.py",
     "test_ui_ros.py", "test_detect_real.py", "test_hostile_input.py", "test_grading_handout.py",
     "test_grading_nbval.py", "test_ros_bag_play.py", "test_course_command.py",
 )
