@@ -59,7 +59,8 @@ import numpy as np
 from .camera import KIT_SOLVER_MODELS, pixel_to_normalized, project_points, undistort_model
 from .covariance import projection_covariance, rodrigues
 from .errors import CalibrationError, DtscalError
-from .findings import Finding
+from .findings import Evidence, Finding
+from .lsq import dist_indices as _lsq_dist_indices
 
 __all__ = ["Finding", "Quality", "UncertaintyMap", "assess", "corner_noise", "residuals", "grid_indices",
            "leave_out_outlier_corners", "corner_severity",
@@ -265,6 +266,11 @@ def residuals_of(fit, obj_list, img_list) -> list[np.ndarray]:
     return np.split(q - obs, np.cumsum(counts)[:-1])
 
 
+def _dist_idx(fit) -> list[int]:
+    """The distortion terms a fit estimated (indices into ``[k1, k2, p1, p2, k3]``)."""
+    return _lsq_dist_indices(getattr(fit, "model", "plumb_bob"), fit.std)
+
+
 def _need_observations(result) -> None:
     if not getattr(result, "object_points", None) or len(result.object_points) != result.n_views:
         raise CalibrationError("this calibration result does not carry its views (object_points, image_points); "
@@ -339,7 +345,7 @@ def corner_noise(object_points, image_points) -> tuple[float, int]:
 
 
 # =========================================================================== projection uncertainty
-def _uncertainty_inputs(result):
+def _uncertainty_inputs(blocks):
     """The normal-equation blocks and the intrinsics' covariance the projection uncertainty propagates.
 
     The noise model's, ``sigma^2 S^-1`` (:mod:`dtscal_lib.covariance`), as mrcal's
@@ -351,7 +357,6 @@ def _uncertainty_inputs(result):
     detector's shared pattern, which is a bias the verdict names (``unexplained_fit``, ``board_warp``), not a
     noise to spread over the image corners.
     """
-    blocks = result.normal_blocks()
     return blocks, blocks.sigma2 * np.linalg.inv(blocks.schur())
 
 
@@ -410,13 +415,13 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     """
     _need_observations(result)
     pix = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-    blocks, cov_i = _uncertainty_inputs(result) if cov is None else cov
+    blocks, cov_i = _uncertainty_inputs(result.normal_blocks()) if cov is None else cov
     if distance is None:
         distance = float(np.median(np.linalg.norm(result.tvecs, axis=1)))
     ray = _rays(result, pix)
     at_infinity = not np.isfinite(distance)
     P = ray if at_infinity else distance * ray
-    _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew, result.dist_indices)
+    _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew, _dist_idx(result))
     R0, dR0 = rodrigues(result.rvecs)
     W = np.einsum("vkij,vlj->vkil", dR0, R0)  # dR/dr_k R^T, a cross-product matrix [w_k]_x
     omegas = np.stack([W[:, :, 2, 1], W[:, :, 0, 2], W[:, :, 1, 0]], axis=1)  # (V, 3 axis, 3 k)
@@ -441,7 +446,7 @@ def uncertainty_map(result, *, step: int = 20, distance: float | None = None, co
     v = np.arange(step / 2, h, step, dtype=float)
     corners = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
     grid = np.column_stack([np.tile(u, len(v)), np.repeat(v, len(u))])
-    cov = _uncertainty_inputs(result) if cov is None else cov
+    cov = _uncertainty_inputs(result.normal_blocks()) if cov is None else cov
     d = float(np.median(np.linalg.norm(result.tvecs, axis=1))) if distance is None else float(distance)
     s = worst_direction_sigma(projection_uncertainty(result, np.vstack([grid, corners]), distance=d, cov=cov))
     return UncertaintyMap(u, v, s[:-4].reshape(len(v), len(u)), corners, s[-4:], d)
@@ -463,7 +468,7 @@ def _board_axis_jacobians(fit, obj_list) -> list[np.ndarray]:
     R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
     Rv = R[view]
     P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
-    _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, fit.dist_indices)
+    _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, _dist_idx(fit))
     return np.split(np.matmul(dqdP, Rv[:, :, :2]), np.cumsum(counts)[:-1])
 
 
@@ -502,11 +507,11 @@ def _line_offsets(fit, obj_list, res, noise) -> dict[tuple[int, int], dict[int, 
     return {k: d for k, d in offsets.items() if len(d) >= max(2, OFFSET_VIEW_SHARE * len(res))}
 
 
-def _without_line(result, obj_list, img_list, axis: int, line: int):
+def _without_line(refit, obj_list, img_list, axis: int, line: int):
     """Re-calibrate without one grid column/row; returns the fit and, per view, that line's mean offset."""
     keep = [grid_indices(o)[:, axis] != line for o in obj_list]
     try:
-        fit = result.refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
+        fit = refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
     except (DtscalError, cv2.error, np.linalg.LinAlgError):  # e.g. too few points left in a view
         return None, None
     res = residuals_of(fit, obj_list, img_list)
@@ -515,7 +520,7 @@ def _without_line(result, obj_list, img_list, axis: int, line: int):
     return fit, means
 
 
-def _offset_findings(result, obj_list, img_list, res, noise, rounds: int = 2) -> list[Finding]:
+def _offset_findings(refit, result, obj_list, img_list, res, noise, rounds: int = 2) -> list[Finding]:
     """Columns or rows of corners offset the same way in many views, located by leaving each suspect out.
 
     The residuals of the full fit smear one bad column over its neighbours (the camera absorbs part
@@ -533,7 +538,7 @@ def _offset_findings(result, obj_list, img_list, res, noise, rounds: int = 2) ->
         top = max(size.values())
         best = None
         for axis, line in [k for k in flagged if size[k] >= 0.5 * top]:  # the strongest suspects only
-            fit, means = _without_line(result, obj_list, img_list, axis, line)
+            fit, means = _without_line(refit, obj_list, img_list, axis, line)
             if fit is not None and (best is None or fit.sigma < best[2].sigma):
                 best = (axis, line, fit, means)
         if best is None:
@@ -729,7 +734,7 @@ def _fit_findings(result, noise: float):
     return findings, notes, fits
 
 
-def _outlier_corners(result, obj_list, img_list, res):
+def _outlier_corners(refit, result, obj_list, img_list, res):
     """Single corners far off where the camera puts them: found, named, left out, the calibration repeated.
 
     A corner is an outlier when its residual (a 2-D vector) is longer than :data:`OUTLIER_CORNER_Z` robust
@@ -751,7 +756,7 @@ def _outlier_corners(result, obj_list, img_list, res):
     for v, i, _ in hits:
         keep[v][i] = False
     try:
-        fit = result.refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
+        fit = refit([o[k] for o, k in zip(obj_list, keep)], [p[k] for p, k in zip(img_list, keep)])
     except (DtscalError, cv2.error, np.linalg.LinAlgError):
         return None, None, []
     left = []
@@ -777,7 +782,7 @@ def _corner_words(h: dict) -> str:
             f"{h['robust_sigmas']:.0f} sigma")
 
 
-def leave_out_outlier_corners(result):
+def leave_out_outlier_corners(result, evidence: Evidence):
     """``result`` calibrated again without its outlier corners (``left_out_corners`` names them), or ``result``.
 
     What ``dtscal calibrate-intrinsics`` and the live CALIBRATE do after dropping outlier views
@@ -788,13 +793,13 @@ def leave_out_outlier_corners(result):
     obj = [np.asarray(o, float)[:, :2] for o in result.object_points]
     img = [np.asarray(p, float).reshape(-1, 2) for p in result.image_points]
     res = residuals(result)
-    finding, fit, left = _outlier_corners(result, obj, img, res)
+    finding, fit, left = _outlier_corners(evidence.refit, result, obj, img, res)
     if fit is None:
         return result
     noise_raw, _ = corner_noise(obj, img)
     noise = max(noise_raw, NOISE_FLOOR_PX) if np.isfinite(noise_raw) else max(result.sigma, NOISE_FLOOR_PX)
     if (any(f.code == "fit" for f in _fit_findings(result, noise)[0])
-            or _offset_findings(result, obj, img, res, noise)):
+            or _offset_findings(evidence.refit, result, obj, img, res, noise)):
         return result
     fit.left_out_corners = list(result.left_out_corners) + left
     return fit
@@ -820,7 +825,7 @@ def _list(views) -> str:
     return ", ".join(map(str, views[:12])) + (f" ... ({len(views)} in all)" if len(views) > 12 else "")
 
 
-def assess(result, *, uncertainty: bool = True, distance: float | None = None) -> Quality:
+def assess(result, evidence: Evidence, *, uncertainty: bool = True, distance: float | None = None) -> Quality:
     """Judge a calibration: verdict (``good`` / ``doubtful`` / ``bad``), findings with advice, uncertainty.
 
     Parameters
@@ -832,14 +837,14 @@ def assess(result, *, uncertainty: bool = True, distance: float | None = None) -
     Time and memory are linear in the views (4000 views of 35 corners: about 2 s and +89 MB on 2 busy cores).
     """
     try:
-        return _assess(result, uncertainty=uncertainty, distance=distance)
+        return _assess(result, evidence, uncertainty=uncertainty, distance=distance)
     except MemoryError:
         raise CalibrationError(
             f"not enough memory to judge a calibration of {result.n_views} views ({result.n_points} corners, about "
             f"{result.n_points * 1.1e-6:.2f} GB needed); judge a calibration of fewer views") from None
 
 
-def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
+def _assess(result, ev: Evidence, *, uncertainty: bool, distance: float | None) -> Quality:
     _need_observations(result)
     obj = [np.asarray(o, float)[:, :2] for o in result.object_points]
     img = [np.asarray(p, float).reshape(-1, 2) for p in result.image_points]
@@ -862,7 +867,7 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
             f"{', '.join(f'{pv[v]:.2f}' for v in bad_views[:6])} px against a median of {np.median(pv):.3f} px)",
             f"drop view(s) {_list(bad_views)} (a wrong or blurred detection) and calibrate again", bad_views))
 
-    line_findings = _offset_findings(result, obj, img, res, noise)
+    line_findings = _offset_findings(ev.refit, result, obj, img, res, noise)
     findings += line_findings
     if line_findings:  # a bent column or row is the cause of the residual: the fit rule only echoes it
         for f in findings:
@@ -883,7 +888,7 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
         findings.append(radial)
     lens_blamed = any(f.code == "fit" for f in fit_findings)  # then far-off corners are the lens's echo
     corner_finding, without_corners, _ = ((None, None, []) if lens_blamed or line_findings
-                                          else _outlier_corners(result, obj, img, res))
+                                          else _outlier_corners(ev.refit, result, obj, img, res))
     left_out = list(getattr(result, "left_out_corners", []) or [])
     if corner_finding is None and left_out:
         corner_finding = Finding(
@@ -912,7 +917,7 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
             "few_views", "doubtful",
             f"only {result.n_views} views: too few to tell a wrong view from the rest",
             f"collect at least {MIN_GOOD_VIEWS} (better 20 or more) views at different places and tilts"))
-    spread = result.board_normal_spread()
+    spread = ev.tilt_spread_deg
     if spread < TILT_DOUBTFUL_DEG:
         findings.append(Finding(
             "parallel_views", "bad" if spread < TILT_BAD_DEG else "doubtful",
@@ -926,9 +931,9 @@ def _assess(result, *, uncertainty: bool, distance: float | None) -> Quality:
     np.add.at(counts, (ri, ci), 1)
     umap = cov = None
     # the projection uncertainty propagates the kit's own solver's normal equations; OpenCV's models have none
-    if uncertainty and result.model in KIT_SOLVER_MODELS:
+    if uncertainty and result.model in KIT_SOLVER_MODELS and ev.blocks is not None:
         try:
-            cov = _uncertainty_inputs(result)
+            cov = _uncertainty_inputs(ev.blocks)
             umap = uncertainty_map(result, distance=distance, cov=cov)
         except np.linalg.LinAlgError:
             umap = None
@@ -1012,7 +1017,7 @@ def consequences(result, *, umap: UncertaintyMap | None = None, cov=None) -> dic
     """
     w, h = result.image_size
     Rc, c = _nominal_camera()
-    cov = _uncertainty_inputs(result) if cov is None else cov
+    cov = _uncertainty_inputs(result.normal_blocks()) if cov is None else cov
     out = []
     for x in CONSEQUENCE_DISTANCES_M:
         Pc = Rc @ (np.array([x, 0.0, 0.0]) - c)
@@ -1082,7 +1087,7 @@ def explain(q: Quality) -> str:
     return " ".join(lines)
 
 
-def monte_carlo_projection(result, pixels, *, runs: int = 50, distance: float | None = None, seed: int = 0,
+def monte_carlo_projection(result, pixels, refit, *, runs: int = 50, distance: float | None = None, seed: int = 0,
                            noise: float | None = None) -> np.ndarray:
     """Projections (runs, M, 2) of the fixed points seen at ``pixels``, re-calibrating on resampled noise.
 
@@ -1105,7 +1110,7 @@ def monte_carlo_projection(result, pixels, *, runs: int = 50, distance: float | 
     s = result.sigma if noise is None else noise
     out = []
     for _ in range(runs):
-        rr = result.refit(obj, [p + rng.normal(0.0, s, p.shape) for p in perfect])
+        rr = refit(obj, [p + rng.normal(0.0, s, p.shape) for p in perfect])
         Pm = np.mean([X @ cv2.Rodrigues(r.reshape(3, 1))[0].T + t for X, r, t in zip(Xb, rr.rvecs, rr.tvecs)],
                      axis=0)
         out.append(project_points(Pm, np.zeros(3), np.zeros(3), rr.K, rr.dist))

@@ -124,11 +124,21 @@ def _gate(session, *, writing: bool, keep_anyway: bool = False) -> tuple[str, li
     ``writing=False`` (only judging) accepts a missing robot name; a refused result raises
     :class:`~dtscal_lib.errors.ImplausibleCalibrationError` unless ``keep_anyway`` (never for COMMIT:
     its caller passes ``keep_anyway=False``)."""
-    refusals = session.refusals()
+    refusals = session.refusals() + _no_verdict(session)
     robot = calib_files.check_robot_name(session.robot) if writing else (session.robot or "camera")
     if refusals and not keep_anyway:
         raise _refusal(refusals, session.kind, robot)
     return robot, refusals
+
+
+def _no_verdict(session) -> list[Finding]:
+    """The verdict step, run before anything is written: a calibration whose verdict failed is refused."""
+    verdict = getattr(session, "quality", None)
+    q = verdict() if verdict is not None else None
+    if not isinstance(q, str):
+        return []
+    return [Finding("no_verdict", "bad", f"the kit could not judge this calibration: {q}",
+                    "report it with the recording; the camera computed is printed above")]
 
 
 def _refusal(refusals, kind: str, robot: str) -> ImplausibleCalibrationError:
@@ -284,15 +294,20 @@ def calibrate_without_outlier_views(object_points, image_points, image_size, **k
 
 
 def assess_quality(result):
-    """The calibration's verdict (:func:`dtscal_lib.quality.assess`), or its failure as a message (a str).
+    """The calibration's verdict, or its failure as a message (a str): the session's verdict step.
 
-    The verdict is extra information: a failing assessment must never lose the calibration.
+    Two steps: what the judge needs from the estimator (:func:`dtscal_lib.result.evidence`: the normal
+    equations, the boards' tilt, a way to calibrate other views alike), then the judge
+    (:func:`dtscal_lib.quality.assess`), which never calls back into the estimator. A failing verdict
+    never loses the calibration: it becomes a message, and the session's gate refuses to write or commit a
+    calibration without a verdict unless kept anyway (:func:`_gate`).
     """
     from .quality import assess
+    from .result import evidence
 
     try:
-        return assess(result)
-    except Exception as exc:  # the verdict is extra information: it must never lose the calibration
+        return assess(result, evidence(result))
+    except Exception as exc:  # never lose the calibration: the gate refuses it, --keep-anyway keeps it
         return f"no verdict ({type(exc).__name__}: {exc})"
 
 
@@ -513,7 +528,7 @@ class IntrinsicSession:
     @property
     def doubts(self) -> list[Finding]:
         """The refusals (empty before CALIBRATE and for a believable result); ``str()`` of each says what to do."""
-        return [] if self.result is None else list(self.refusals())
+        return [] if self.result is None else list(self.refusals()) + _no_verdict(self)
 
     def quality(self, known=None):
         """The verdict (:class:`~dtscal_lib.quality.Quality`, or a message when it cannot be made).
@@ -536,9 +551,7 @@ class IntrinsicSession:
         """Verdict and refusals together: the verdict's findings, then the refusals (:meth:`refusals`, the
         plausibility doubts). A result with refusals is not written unless kept anyway."""
         q = self.quality()
-        verdict = list(getattr(q, "findings", [])) if not isinstance(q, str) else [
-            Finding("no_verdict", "doubtful", q, "the calibration itself is kept; check it with --report")]
-        return verdict + self.refusals()
+        return (list(q.findings) if not isinstance(q, str) else _no_verdict(self)) + self.refusals()
 
     # ---- write, commit
     def calibration(self) -> calib_files.IntrinsicCalibration | None:

@@ -245,7 +245,7 @@ def test_uncertainty_agrees_with_monte_carlo_recalibration(session):
     blocks = res.normal_blocks()
     noise_model = (blocks, blocks.sigma2 * np.linalg.inv(blocks.schur()))
     umap = quality.uncertainty_map(res, cov=noise_model)
-    runs = quality.monte_carlo_projection(res, umap.corners, runs=50, seed=1, distance=umap.distance)
+    runs = quality.monte_carlo_projection(res, umap.corners, res.refit, runs=50, seed=1, distance=umap.distance)
     dev = runs - runs.mean(axis=0)
     cov = np.einsum("rmi,rmj->mij", dev, dev) / (len(runs) - 1)
     mc = quality.worst_direction_sigma(cov)
@@ -293,9 +293,9 @@ def test_too_many_views_or_too_little_memory_is_a_clear_error_not_a_traceback(mo
 
 
 def test_quality_and_calibration_do_not_import_each_other_both_ways():
-    """quality gets what it needs from CalibrationResult's public methods (normal_blocks, refit, ...):
-    calibration imports quality (for result.quality()), quality never imports calibration, and the
-    shared covariance module imports neither."""
+    """The judge gets what it needs passed in (dtscal_lib.result.evidence: the normal equations, the tilt,
+    a refit): quality imports neither the estimator (calibration) nor its result module, the estimator does
+    not import the judge, and the shared covariance module imports neither."""
     import ast
     from pathlib import Path
 
@@ -309,6 +309,6 @@ def test_quality_and_calibration_do_not_import_each_other_both_ways():
                 out.update([node.module] if node.module else [a.name for a in node.names])
         return out
 
-    assert "calibration" not in imported("quality")
+    assert not {"calibration", "result"} & imported("quality")
     assert not {"calibration", "quality"} & imported("covariance")
-    assert "quality" in imported("calibration")
+    assert "quality" not in imported("calibration") and "result" in imported("calibration")
