@@ -33,9 +33,8 @@ The verdict is the worst severity of the findings: ``"good"`` when there is none
 ``"doubtful"`` or ``"bad"``; every finding carries advice (which views to drop, where to hold the
 board next).
 
-Example: eight well-tilted views, but every board in the middle of the image, so the image corners
-are extrapolated and the verdict says where to hold the board next (advice: the robot's own view, the
-lower half of the image, is known well enough).
+Example: eight well-tilted views, but every board in the middle of the image, so the lower half of the
+image, where a Duckiebot sees the road, is extrapolated: bad, and the verdict says where to hold the board.
 
 >>> import numpy as np
 >>> from dtscal_lib import camera, duckietown as dt
@@ -50,9 +49,9 @@ lower half of the image, is known well enough).
 ...        for r, t in poses]
 >>> q = calibrate([obj] * len(img), img, dt.IMAGE_SIZE).quality()
 >>> q.verdict, [f.code for f in q.findings]
-('doubtful', ['uncertainty'])
->>> print(q.findings[0].advice)  # doctest: +ELLIPSIS
-hold the board next in the ... of the image (filling it, tilted), where the uncertainty is largest
+('bad', ['robot_view'])
+>>> print(q.findings[0].advice)
+collect more views filling the lower half of the image, tilted
 """
 
 from __future__ import annotations
@@ -63,6 +62,10 @@ import numpy as np
 
 from .errors import CalibrationError
 from .findings import Evidence, Finding
+from .limits import (  # noqa: F401  (re-exported: the verdict's thresholds, one table in dtscal_lib.limits)
+    CORNER_SIGMA_DOUBTFUL, FIT_RATIO_BAD, FIT_RATIO_DOUBTFUL, MIN_GOOD_VIEWS, NEIGHBOUR_CORRELATION, OFFSET_VIEW_SHARE,
+    OFFSET_Z, RADIAL_FRACTION, RADIAL_Z, ROBOT_SHIFT_BAD_PX, ROBOT_VIEW_SIGMA_BAD, ROBOT_VIEW_SIGMA_DOUBTFUL,
+    SYSTEMATIC_RATIO_BAD, TILT_BAD_DEG, TILT_DOUBTFUL_DEG, VIEW_OUTLIER_FACTOR)
 from .rules import (  # noqa: F401  (re-exported: the verdict's checks as they were here)
     NOISE_FLOOR_PX, corner_noise, grid_indices, leave_out_outlier_corners, prepare, residuals, residuals_of,
     run_rules)
