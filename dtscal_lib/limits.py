@@ -278,41 +278,50 @@ TABLE: tuple[Limit, ...] = (
 #: every limit by name
 LIMITS: dict[str, Limit] = {lim.name: lim for lim in TABLE}
 
-MIN_TILT_SPREAD_DEG = LIMITS["min_tilt_spread"].value
-FOCAL_STD_UNDETERMINED = LIMITS["focal_std_undetermined"].value
-TILT_BAD_DEG = LIMITS["tilt_bad"].value
-TILT_DOUBTFUL_DEG = LIMITS["tilt_doubtful"].value
-MIRROR_MIN_CONTRAST = LIMITS["mirror_min_contrast"].value
+def _number(name: str) -> float:
+    """The value of a one-number row (not a range)."""
+    value = LIMITS[name].value
+    if isinstance(value, tuple):
+        raise TypeError(f"limit {name} is a range, not a number")
+    return value
+
+
+
+MIN_TILT_SPREAD_DEG = _number("min_tilt_spread")
+FOCAL_STD_UNDETERMINED = _number("focal_std_undetermined")
+TILT_BAD_DEG = _number("tilt_bad")
+TILT_DOUBTFUL_DEG = _number("tilt_doubtful")
+MIRROR_MIN_CONTRAST = _number("mirror_min_contrast")
 #: the detector's refusal of a found board (:mod:`dtscal_lib.detect.grid`)
-GRID_TOLERANCE_PX = LIMITS["grid_tolerance_px"].value
-GRID_TOLERANCE_FRACTION = LIMITS["grid_tolerance_fraction"].value
-SMOOTH_GRID_TOLERANCE = LIMITS["smooth_grid_tolerance"].value
+GRID_TOLERANCE_PX = _number("grid_tolerance_px")
+GRID_TOLERANCE_FRACTION = _number("grid_tolerance_fraction")
+SMOOTH_GRID_TOLERANCE = _number("smooth_grid_tolerance")
 #: a board declared smaller than it is (:meth:`dtscal_lib.session.IntrinsicSession.calibrate`)
-PATTERN_CONTINUES_SHARE = LIMITS["pattern_continues_share"].value
+PATTERN_CONTINUES_SHARE = _number("pattern_continues_share")
 
 #: the verdict's thresholds (:func:`dtscal_lib.quality.assess`)
-FIT_RATIO_DOUBTFUL = LIMITS["fit_ratio_doubtful"].value
-FIT_RATIO_BAD = LIMITS["fit_ratio_bad"].value
-CORNER_SIGMA_DOUBTFUL = LIMITS["corner_sigma_doubtful"].value
-ROBOT_VIEW_SIGMA_DOUBTFUL = LIMITS["robot_view_sigma_doubtful"].value
-ROBOT_VIEW_SIGMA_BAD = LIMITS["robot_view_sigma_bad"].value
-ROBOT_SHIFT_BAD_PX = LIMITS["robot_shift_bad"].value
-VIEW_OUTLIER_FACTOR = LIMITS["view_outlier_factor"].value
-OFFSET_Z = LIMITS["offset_z"].value
-OFFSET_VIEW_SHARE = LIMITS["offset_view_share"].value
-RADIAL_Z = LIMITS["radial_z"].value
-RADIAL_FRACTION = LIMITS["radial_fraction"].value
-NEIGHBOUR_CORRELATION = LIMITS["neighbour_correlation"].value
-SYSTEMATIC_RATIO_BAD = LIMITS["systematic_ratio_bad"].value
-MIN_GOOD_VIEWS = LIMITS["min_good_views"].value
+FIT_RATIO_DOUBTFUL = _number("fit_ratio_doubtful")
+FIT_RATIO_BAD = _number("fit_ratio_bad")
+CORNER_SIGMA_DOUBTFUL = _number("corner_sigma_doubtful")
+ROBOT_VIEW_SIGMA_DOUBTFUL = _number("robot_view_sigma_doubtful")
+ROBOT_VIEW_SIGMA_BAD = _number("robot_view_sigma_bad")
+ROBOT_SHIFT_BAD_PX = _number("robot_shift_bad")
+VIEW_OUTLIER_FACTOR = _number("view_outlier_factor")
+OFFSET_Z = _number("offset_z")
+OFFSET_VIEW_SHARE = _number("offset_view_share")
+RADIAL_Z = _number("radial_z")
+RADIAL_FRACTION = _number("radial_fraction")
+NEIGHBOUR_CORRELATION = _number("neighbour_correlation")
+SYSTEMATIC_RATIO_BAD = _number("systematic_ratio_bad")
+MIN_GOOD_VIEWS = _number("min_good_views")
 #: ``--cross-validate``'s threshold (:meth:`dtscal_lib.compare.CrossValidation.finding`)
-CROSS_VALIDATION_RATIO = LIMITS["cross_validation_ratio"].value
-LENS_SHARE = LIMITS["lens_share"].value
-UNEXPLAINED_RATIO_DOUBTFUL = LIMITS["unexplained_ratio_doubtful"].value
-UNEXPLAINED_RATIO_BAD = LIMITS["unexplained_ratio_bad"].value
-OUTLIER_CORNER_Z = LIMITS["outlier_corner_z"].value
-OUTLIER_CORNER_MAX_SHARE = LIMITS["outlier_corner_max_share"].value
-OUTLIER_CORNER_MIN_PX = LIMITS["outlier_corner_min_px"].value
+CROSS_VALIDATION_RATIO = _number("cross_validation_ratio")
+LENS_SHARE = _number("lens_share")
+UNEXPLAINED_RATIO_DOUBTFUL = _number("unexplained_ratio_doubtful")
+UNEXPLAINED_RATIO_BAD = _number("unexplained_ratio_bad")
+OUTLIER_CORNER_Z = _number("outlier_corner_z")
+OUTLIER_CORNER_MAX_SHARE = _number("outlier_corner_max_share")
+OUTLIER_CORNER_MIN_PX = _number("outlier_corner_min_px")
 
 #: the refusal limits of an intrinsic calibration (:func:`dtscal_lib.plausibility.intrinsic_doubts`)
 INTRINSIC_LIMITS = {

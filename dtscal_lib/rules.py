@@ -15,7 +15,7 @@ pixels; the uncertainty at image corners no board reached is advice (hold the bo
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import cv2
 import numpy as np
@@ -577,7 +577,7 @@ def _robot_cost(shift_px: float, image_size) -> tuple[str, str]:
 class Case:
     """What the rules read, and what they found so far."""
 
-    result: object
+    result: Any
     evidence: Evidence
     obj: list
     img: list
@@ -585,7 +585,7 @@ class Case:
     noise: float
     n_noise: int
     umap: UncertaintyMap | None
-    cov: object
+    cov: Any
     cons: dict | None
     counts: np.ndarray
     help_region: str
@@ -594,7 +594,7 @@ class Case:
     richer: dict | None = None
     lines: list = field(default_factory=list)
     corner_finding: Finding | None = None
-    without_corners: object = None
+    without_corners: Any = None
     fit_blamed: bool = False
 
     @property
