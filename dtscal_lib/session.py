@@ -57,6 +57,10 @@ MIN_SAMPLES = 3
 OUTLIER_FACTOR = VIEW_OUTLIER_FACTOR
 #: never drop more than this share of the views as outliers
 MAX_OUTLIER_SHARE = 0.2
+#: frames without the declared board kept to name the board that is there, and how far from the declared
+#: counts of inner corners the search goes (a 9x6 board declared 9x5, 10x6, 7x6 or 11x8 is named)
+MISSED_KEPT = 4
+SIZE_SEARCH = 2
 
 
 # --------------------------------------------------------------------------- the robot's name: one rule
@@ -348,6 +352,9 @@ class IntrinsicSession:
         self._refusals: list[Finding] | None = None
         #: found detections by the bigger pattern the saddles showed around them (None: the declared size)
         self._patterns: Counter = Counter()
+        #: a few frames where the declared board was not found (spread over the run), to name the board that is there
+        self._missed: list = []
+        self._n_missed = 0
 
     # ---- frames
     def offer(self, frame) -> Offer:
@@ -376,6 +383,7 @@ class IntrinsicSession:
         if not det.found:
             reason = det.reason or Reason.NO_BOARD
             group.tally.reject(reason)
+            self._keep_missed(img)
             return Offer(False, reason, det, img)
         with self.lock:
             group.found += 1
@@ -411,6 +419,42 @@ class IntrinsicSession:
                 f"({cols}x{rows} inner corners are seen), so each view would be a part of the board found at some "
                 f"place on it and the calibration meaningless. Nothing was calibrated: pass --board {cols}x{rows} "
                 "(count the inner corners, where four squares meet)", reason=Reason.BOARD_SIZE)
+
+    def _keep_missed(self, img) -> None:
+        """Keep at most :data:`MISSED_KEPT` frames without the declared board, spread over the run (the 1st, 2nd,
+        4th, 8th, ... missed frame), for :meth:`_board_there`."""
+        with self.lock:
+            self._n_missed += 1
+            n = self._n_missed
+            if n & (n - 1) == 0:  # a power of two
+                self._missed = (self._missed + [img])[-MISSED_KEPT:]
+
+    def _board_there(self) -> tuple[int, int] | None:
+        """The board size (inner corners) the missed frames show, when the declared one was never found.
+
+        Sizes near the declared one (each count within :data:`SIZE_SEARCH` of it, either way round) are looked
+        for with the kit's detector, the nearest first; a size found in a frame is the answer, or the larger
+        pattern its saddles continue into (:attr:`~dtscal_lib.detect.Detection.pattern_seen`).
+        """
+        with self.lock:
+            frames = list(self._missed)
+        c0, r0 = self.board.cols, self.board.rows
+        sizes = {(c, r) for c in range(c0 - SIZE_SEARCH, c0 + SIZE_SEARCH + 1)
+                 for r in range(r0 - SIZE_SEARCH, r0 + SIZE_SEARCH + 1) if c >= 3 and r >= 3 and c != r}
+        sizes |= {(r, c) for c, r in sizes}
+        sizes.discard((c0, r0))
+        def order(cr):  # nearest the declared first, the declared way round, the larger
+            return abs(cr[0] - c0) + abs(cr[1] - r0), (cr[0] > cr[1]) != (c0 > r0), -cr[0] * cr[1]
+
+        for cols, rows in sorted(sizes, key=order):
+            for img in frames:
+                try:
+                    det = detect_board(img, Board(cols, rows, self.board.square))
+                except (DtscalError, cv2.error):
+                    continue
+                if det.found:
+                    return det.pattern_seen or (cols, rows)
+        return None
 
     def skipped(self, counts) -> None:
         """Count frames a source skipped itself (corrupt frames of a live camera), by reason."""
@@ -489,6 +533,13 @@ class IntrinsicSession:
             raise DtscalError(f"{self.source}: no readable frame ({tally.total} frames, rejected: "
                               f"{dict(tally.rejected) or 'none'}); check the path and the topic")
         if len(obj) < MIN_SAMPLES:
+            there = self._board_there()
+            if there is not None:
+                raise CalibrationError(
+                    f"the declared {self.board.cols}x{self.board.rows} board was never found in {self.source} "
+                    f"({tally.total} frames), but a {there[0]}x{there[1]} board (inner corners) is there. Nothing was "
+                    f"calibrated: pass --board {there[0]}x{there[1]} (count the inner corners, where four squares "
+                    "meet)", reason=Reason.BOARD_SIZE)
             raise CalibrationError(
                 f"only {len(obj)} usable view(s) of the {self.board.describe()} board in {self.source} "
                 f"({tally.total} frames; rejected: {dict(tally.rejected)}). Calibration needs at least "
