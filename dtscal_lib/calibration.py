@@ -402,6 +402,7 @@ def _calibrate(obj, img, size, model: str, skew: bool, fix_k3: bool, initial) ->
         n_points=int(npts.sum()),
         sigma=float(np.sqrt(sigma2)),
         iterations=iters,
+        converged=not problem.capped,
         object_points=obj,
         image_points=img,
         std_noise_model=std_noise,

@@ -73,6 +73,8 @@ class _Problem:
         xy = np.concatenate([np.asarray(o, dtype=np.float64)[:, :2] for o in obj])
         self.x, self.y = xy[:, 0].copy(), xy[:, 1].copy()
         self.observed = np.concatenate([np.asarray(m, dtype=np.float64).reshape(-1, 2) for m in img])
+        #: a full refinement (:data:`MAX_ITERATIONS`) stopped at its cap instead of converging
+        self.capped = False
 
     def residuals(self, theta, poses) -> list[np.ndarray]:
         """Per view (N_i, 2) ``projected - observed`` pixels (skew honoured), view by view."""
@@ -265,6 +267,9 @@ def _refine(problem: _Problem, theta, poses, max_iter: int = MAX_ITERATIONS):
         if small_step or stalled or cost == 0.0:
             break
         r, Ji, Je = problem.linearize_stacked(theta, poses)
+    else:
+        if max_iter >= MAX_ITERATIONS and it:  # the cap ended the full refinement, not a stop criterion
+            problem.capped = True
     return theta, poses, it
 
 

@@ -67,6 +67,9 @@ class CalibrationResult:
     sigma: float = field(default=float("nan"))
     #: Levenberg-Marquardt iterations used
     iterations: int = 0
+    #: the refinement stopped on its own criteria (a step too small to matter, no decrease left), not at its cap
+    #: (:data:`dtscal_lib.lsq.MAX_ITERATIONS`); the verdict calls a result that did not converge bad
+    converged: bool = True
     #: the views the result was fitted to, (N_i, 2) board-plane points and (N_i, 2) pixels, for
     #: :meth:`quality` (residuals, verdict, projection uncertainty)
     object_points: list = field(default_factory=list, repr=False)
