@@ -90,19 +90,19 @@ def status(key):
 seen = {{}}
 inner = quality.assess
 
-def measured_assess(result, **kw):  # the verdict step of the command, measured on its own
+def measured_assess(result, evidence, **kw):  # the verdict step of the command, measured on its own
     start = status("VmRSS")
     peak_before = status("VmHWM")
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")
     t0 = time.perf_counter()
-    q = inner(result, **kw)
+    q = inner(result, evidence, **kw)
     seen.update(quality_seconds=time.perf_counter() - t0, quality_peak_above_start_mb=status("VmHWM") - start,
                 views=int(result.n_views), points=int(result.n_points), verdict=q.verdict)
     seen["command_peak_mb"] = max(seen.get("command_peak_mb", 0.0), peak_before)
     return q
 
-quality.assess = calibration.assess = measured_assess
+quality.assess = measured_assess
 base = status("VmRSS")
 t0 = time.perf_counter()
 code = cli.main(["calibrate-intrinsics", "--source", {folder!r}, "--no-write", "--json", "-q"])

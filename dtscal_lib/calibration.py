@@ -60,28 +60,27 @@ True
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import cv2
 import numpy as np
 
-from .camera import DIST_MODELS, KIT_SOLVER_MODELS, MODEL_COEFFS, CameraModel, as_K, as_points, project_points
-from .covariance import NormalBlocks, honest_intrinsic_covariance
-from .covariance import rodrigues as _rodrigues
+from .camera import DIST_MODELS, KIT_SOLVER_MODELS, MODEL_COEFFS, as_K, as_points, project_points
+from .closed_form import (  # noqa: F401  (re-exported: the closed form's names as they were here)
+    _check_not_degenerate, _constraint_matrix, _image_normalizer, _intrinsics_from_b, _null_vector,
+    _pose_from_homography, _v_row, board_normal_spread, plane_homography, zhang_closed_form)
+from .covariance import rodrigues as _rodrigues  # noqa: F401
 from .errors import CalibrationError, DtscalError
-from .homography import estimate_homography
-from .quality import assess, leave_out_outlier_corners
+from .lsq import (  # noqa: F401  (re-exported: the least-squares problem's names as they were here)
+    MAX_ITERATIONS, _cost, _dist_indices, _intrinsic_covariance, _normal_blocks, _param_names, _Problem, _refine,
+    _schur_solve, _unpack)
+from .result import CalibrationResult
 from .validation import check_image_size
 
 __all__ = ["CalibrationResult", "calibrate", "zhang_closed_form", "plane_homography", "board_normal_spread"]
 
-_DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")
 #: a view needs at least this many points (a homography has 8 degrees of freedom)
 MIN_POINTS_PER_VIEW = 4
 #: Zhang's constraints need at least this many views
 MIN_VIEWS = 3
-#: relative singular value below which the stacked Zhang constraints count as rank deficient
-_PARALLEL_VIEWS_TOL = 2e-3
 #: boards whose recovered normals all lie within this angle (degrees) of their mean are "parallel";
 #: a focal length whose standard deviation exceeds this fraction of it is not determined (limits of the
 #: mathematics, named apart from the beliefs in the one table: dtscal_lib.limits)
@@ -95,135 +94,6 @@ IMAGE_SLACK = 0.25
 #: verdict about 0.6 kB (benchmarks/bench_memory.py: 4000 views x 35 corners, +148 MB and +82-89 MB), so
 #: this keeps either near 1 GB; more views than that add nothing a subset would not give
 MAX_POINTS = 1_000_000
-
-
-# =========================================================================== result
-@dataclass
-class CalibrationResult:
-    """Outcome of :func:`calibrate`.
-
-    Attributes
-    ----------
-    K : (3, 3) float64 intrinsic matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``
-    dist : (5,) float64 ``[k1, k2, p1, p2, k3]``; zeros for terms the model does not estimate
-    rms : float, pixels: ``sqrt(sum over points of |reprojection residual|^2 / N)``,
-        as ``cv2.calibrateCamera`` reports it (a residual is a 2-D vector)
-    per_view_rms : (V,) float64 pixels, the same per view
-    rvecs, tvecs : (V, 3) float64, board -> camera (Rodrigues vector, translation in
-        the object points' unit)
-    std : standard deviation of every estimated intrinsic parameter, keyed
-        ``fx, fy, cx, cy, [skew], k1, k2, [p1, p2, [k3]]``: how far it would move, 1 sigma, if the
-        calibration were repeated with new views of the same kind. The larger of the corner-noise
-        model's and a sandwich over the views, close to a jackknife (:mod:`dtscal_lib.covariance`;
-        ``std_method`` says which applied): residuals that are not independent noise make it larger
-    std_noise_model : the same from the noise model alone, ``sigma^2 (J^T J)^-1`` (OpenCV's
-        ``stdDeviationsIntrinsics``)
-    model : ``"plumb_bob"`` or ``"radial2"``
-    skew : whether the skew ``s = K[0, 1]`` was estimated
-    image_size : (width, height)
-    n_views, n_points : number of views and of points over all views
-    """
-
-    K: np.ndarray
-    dist: np.ndarray
-    rms: float
-    per_view_rms: np.ndarray
-    rvecs: np.ndarray
-    tvecs: np.ndarray
-    std: dict[str, float]
-    model: str
-    skew: bool
-    image_size: tuple[int, int]
-    n_views: int
-    n_points: int
-    #: ``sigma`` of the residual per coordinate, ``sqrt(|e|^2 / (2N - p))``, pixels
-    sigma: float = field(default=float("nan"))
-    #: Levenberg-Marquardt iterations used
-    iterations: int = 0
-    #: the views the result was fitted to, (N_i, 2) board-plane points and (N_i, 2) pixels, for
-    #: :meth:`quality` (residuals, verdict, projection uncertainty)
-    object_points: list = field(default_factory=list, repr=False)
-    image_points: list = field(default_factory=list, repr=False)
-    #: standard deviations from the corner-noise model alone (see ``std``)
-    std_noise_model: dict = field(default_factory=dict)
-    #: how ``std`` (and the projection uncertainty) were computed, in words
-    std_method: str = ""
-    #: (n, n) covariance of the intrinsics in the order of ``std`` (the one ``std`` is the diagonal of)
-    covariance: np.ndarray | None = field(default=None, repr=False)
-    #: single corners left out as outliers before this fit (:func:`dtscal_lib.quality.leave_out_outlier_corners`),
-    #: each ``{"view", "corner", "column", "row", "residual_px", "robust_sigmas"}`` (corner: its index in the view
-    #: as detected); the views' points here no longer hold them
-    left_out_corners: list = field(default_factory=list)
-
-    def quality(self, **kw):
-        """Verdict, systematic-residual checks and projection uncertainty: :func:`dtscal_lib.quality.assess`."""
-        return assess(self, **kw)
-
-    # ------------------------------------------------------------------ what the judge needs
-    @property
-    def dist_indices(self) -> list[int]:
-        """Indices into ``[k1, k2, p1, p2, k3]`` of the estimated distortion terms."""
-        return _dist_indices(self.model, fix_k3="k3" not in self.std)
-
-    def intrinsic_vector(self) -> np.ndarray:
-        """The estimated intrinsics ``[fx, fy, cx, cy, (skew), dist...]`` in the order of ``std``."""
-        K, di = self.K, self.dist_indices
-        return np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], [K[0, 1]] if self.skew else [],
-                               np.asarray(self.dist)[di]])
-
-    def normal_blocks(self) -> NormalBlocks:
-        """The normal equations at the solution, block by block (:class:`~dtscal_lib.covariance.NormalBlocks`)."""
-        _need_views(self)
-        problem = _Problem([np.asarray(o, dtype=np.float64)[:, :2] for o in self.object_points],
-                           [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in self.image_points],
-                           self.skew, self.dist_indices)
-        return problem.blocks(self.intrinsic_vector(), np.column_stack([self.rvecs, self.tvecs]))
-
-    def intrinsic_covariance(self) -> np.ndarray:
-        """(n, n) covariance of the intrinsics (``covariance``, recomputed if the result was built without it)."""
-        if self.covariance is None:
-            self.covariance = honest_intrinsic_covariance(self.normal_blocks())[0]
-        return self.covariance
-
-    def without_outlier_corners(self) -> "CalibrationResult":
-        """This calibration repeated without its single far-off corners, which ``left_out_corners`` then names
-        (:func:`dtscal_lib.quality.leave_out_outlier_corners`); itself when there is none."""
-        return leave_out_outlier_corners(self)
-
-    def refit(self, object_points, image_points) -> "CalibrationResult":
-        """:func:`calibrate` other views with this result's model, skew and k3 choice."""
-        return calibrate(object_points, image_points, self.image_size, model=self.model, skew=self.skew,
-                         fix_k3="k3" not in self.std)
-
-    def board_normal_spread(self) -> float:
-        """Largest angle (degrees) between a board normal and the mean normal: :func:`board_normal_spread`."""
-        return board_normal_spread(self.rvecs)
-
-    def camera(self) -> CameraModel:
-        """The calibrated camera, with ``P`` from ``alpha = 0`` as ROS's calibrator sets it."""
-        return CameraModel(self.K, self.dist, self.image_size, self.model)
-
-    def to_dict(self) -> dict:
-        """A JSON-serialisable summary (plain lists, floats, ints, strings)."""
-        return {
-            "model": self.model,
-            "skew_estimated": bool(self.skew),
-            "image_size": [int(self.image_size[0]), int(self.image_size[1])],
-            "K": [[float(v) for v in row] for row in np.asarray(self.K)],
-            "dist": [float(v) for v in np.asarray(self.dist).ravel()],
-            "rms": float(self.rms),
-            "sigma": float(self.sigma),
-            "per_view_rms": [float(v) for v in self.per_view_rms],
-            "std": {k: float(v) for k, v in self.std.items()},
-            "std_noise_model": {k: float(v) for k, v in self.std_noise_model.items()},
-            "std_method": self.std_method,
-            "rvecs": [[float(v) for v in r] for r in self.rvecs],
-            "tvecs": [[float(v) for v in t] for t in self.tvecs],
-            "n_views": int(self.n_views),
-            "n_points": int(self.n_points),
-            "iterations": int(self.iterations),
-            "left_out_corners": [dict(c) for c in self.left_out_corners],
-        }
 
 
 # =========================================================================== OpenCV's models
@@ -393,12 +263,6 @@ def _check_views(object_points, image_points, image_size):
     return obj_out, img_out, (w, h)
 
 
-def _need_views(result) -> None:
-    if not result.object_points or len(result.object_points) != result.n_views:
-        raise CalibrationError("this calibration result does not carry its views (object_points, image_points); "
-                               "recompute it with dtscal_lib.calibration.calibrate to judge its quality")
-
-
 def _view_array(a, dims: tuple[int, ...], name: str) -> np.ndarray:
     return as_points(a, dims, name, error=CalibrationError)
 
@@ -414,391 +278,6 @@ def _line_spread(p: np.ndarray, absolute: bool = False) -> float:
     if absolute:
         return float(s[1] / np.sqrt(len(p)))
     return float(s[1] / s[0]) if s[0] > 0 else 0.0
-
-
-# =========================================================================== homographies, Zhang
-def plane_homography(plane_points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-    """Normalized DLT homography from board-plane points to pixels.
-
-    The kit's one implementation is :func:`dtscal_lib.homography.estimate_homography`.
-    """
-    return estimate_homography(plane_points, pixels)
-
-
-def _null_vector(A: np.ndarray) -> np.ndarray:
-    """Unit right singular vector of the smallest singular value of ``A`` (m, n).
-
-    Only the thin SVD is computed when ``m >= n``: the full one would build an
-    (m, m) matrix of left singular vectors, quadratic in the number of views or points.
-    """
-    return np.linalg.svd(A, full_matrices=A.shape[0] < A.shape[1])[2][-1]
-
-
-def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:
-    """Zhang's ``v_ij`` with ``h_i^T B h_j = v_ij . b`` for ``b = (B11, B12, B22, B13, B23, B33)``."""
-    # h_i^T B h_j = sum_kl B_kl (h_i h_j^T)_kl; off-diagonal entries of the symmetric B
-    # collect both (k, l) and (l, k)
-    outer = np.outer(H[:, i], H[:, j])
-    sym = outer + outer.T
-    return np.array([outer[0, 0], sym[0, 1], outer[1, 1], sym[0, 2], sym[1, 2], outer[2, 2]])
-
-
-def _image_normalizer(size: tuple[int, int]) -> np.ndarray:
-    """Pixels -> roughly unit coordinates (centre at 0, scale ``(w + h) / 2``) for conditioning."""
-    w, h = size
-    f = (w + h) / 2.0
-    return np.array([[1.0 / f, 0.0, -(w - 1) / 2.0 / f], [0.0, 1.0 / f, -(h - 1) / 2.0 / f], [0.0, 0.0, 1.0]])
-
-
-def _constraint_matrix(homographies, size, skew: bool) -> np.ndarray:
-    """Stacked Zhang constraints (12)-(13) for homographies in image-normalized coordinates.
-
-    Each row is scaled to unit norm so that views weigh alike; without skew the row
-    ``B12 = 0`` is appended.
-    """
-    T = _image_normalizer(size)
-    rows = []
-    for H in homographies:
-        Hn = T @ H
-        Hn = Hn / np.sqrt(np.linalg.norm(Hn[:, 0]) * np.linalg.norm(Hn[:, 1]))
-        for r in (_v_row(Hn, 0, 1), _v_row(Hn, 0, 0) - _v_row(Hn, 1, 1)):
-            rows.append(r / np.linalg.norm(r))
-    if not skew:
-        rows.append(np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0]))
-    return np.array(rows)
-
-
-def _check_not_degenerate(V: np.ndarray, n_views: int, skew: bool) -> None:
-    """Raise if the constraints leave more than a one-dimensional family of ``b``."""
-    s = np.linalg.svd(V, compute_uv=False)
-    ratio = s[4] / s[0]
-    if ratio < _PARALLEL_VIEWS_TOL:
-        need = "at least 3 board orientations" if skew else "at least 2 clearly different board orientations"
-        raise CalibrationError(
-            f"the {n_views} views do not constrain the intrinsics: the boards are (nearly) parallel "
-            f"to each other (Zhang's constraint matrix is rank deficient, relative singular value "
-            f"{ratio:.2g}). Shifting or turning the board in its own plane adds nothing; tilt it "
-            f"left/right and up/down by 20-45 degrees to get {need}."
-        )
-
-
-def _intrinsics_from_b(b: np.ndarray) -> np.ndarray | None:
-    """Zhang's appendix B: ``K`` from ``b`` (up to scale); ``None`` if not physical."""
-    if b[0] < 0:
-        b = -b
-    B11, B12, B22, B13, B23, B33 = b
-    den = B11 * B22 - B12 * B12
-    if B11 <= 0 or den <= 0:
-        return None
-    v0 = (B12 * B13 - B11 * B23) / den
-    lam = B33 - (B13 * B13 + v0 * (B12 * B13 - B11 * B23)) / B11
-    if lam <= 0:
-        return None
-    alpha = np.sqrt(lam / B11)
-    beta = np.sqrt(lam * B11 / den)
-    gamma = -B12 * alpha * alpha * beta / lam
-    u0 = gamma * v0 / beta - B13 * alpha * alpha / lam
-    K = np.array([[alpha, gamma, u0], [0.0, beta, v0], [0.0, 0.0, 1.0]])
-    return K if np.all(np.isfinite(K)) else None
-
-
-def zhang_closed_form(homographies, image_size, *, skew: bool = True) -> np.ndarray | None:
-    """Zhang's closed-form intrinsics from plane-to-image homographies.
-
-    Solves ``V b = 0`` (activity text, eqs. (12)-(13) of every view, stacked), ``b`` the
-    upper triangle of ``B = K^-T K^-1``, in image-normalized coordinates for
-    conditioning, then reads ``K`` off ``B``.
-
-    Parameters
-    ----------
-    homographies : sequence of (3, 3) board-plane -> pixel homographies
-    image_size : (width, height), only used for conditioning
-    skew : estimate the skew (else ``B12 = 0`` is imposed)
-
-    Returns
-    -------
-    (3, 3) float64 K, or ``None`` when the solution is not physical (``B`` not
-    positive definite: noise, strong distortion or nearly degenerate views).
-    """
-    size = (int(image_size[0]), int(image_size[1]))
-    V = _constraint_matrix(homographies, size, skew)
-    b = _null_vector(V)
-    Kn = _intrinsics_from_b(b)
-    if Kn is None:
-        return None
-    K = np.linalg.solve(_image_normalizer(size), Kn)  # K = T^-1 Kn
-    K = K / K[2, 2]
-    if not skew:
-        K[0, 1] = 0.0
-    return K
-
-
-def _pose_from_homography(H: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Board pose ``(rvec, t)`` from ``H ~ K [r1 r2 t]``; rotation made orthonormal by SVD."""
-    M = np.linalg.solve(K, H)
-    lam = 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
-    if M[2, 2] * lam < 0:  # the board must be in front of the camera
-        lam = -lam
-    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, 2]
-    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
-    R = U @ Wt
-    if np.linalg.det(R) < 0:
-        R = U @ np.diag([1.0, 1.0, -1.0]) @ Wt
-    return cv2.Rodrigues(R)[0].ravel(), t
-
-
-# =========================================================================== parameters
-def _dist_indices(model: str, fix_k3: bool) -> list[int]:
-    if model == "radial2":
-        return [0, 1]
-    return [0, 1, 2, 3] if fix_k3 else [0, 1, 2, 3, 4]
-
-
-def _param_names(skew: bool, dist_idx: list[int]) -> list[str]:
-    return ["fx", "fy", "cx", "cy"] + (["skew"] if skew else []) + [_DIST_NAMES[i] for i in dist_idx]
-
-
-def _unpack(theta: np.ndarray, skew: bool, dist_idx: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    fx, fy, cx, cy = theta[:4]
-    s = theta[4] if skew else 0.0
-    dist = np.zeros(5)
-    dist[dist_idx] = theta[4 + int(skew):]
-    K = np.eye(3)
-    K[0] = (fx, s, cx)
-    K[1, 1:] = (fy, cy)
-    return K, dist
-
-
-class _Problem:
-    """Residuals and block Jacobians of the reprojection error.
-
-    Intrinsic vector ``theta = [fx, fy, cx, cy, (s), dist...]``; poses ``(V, 6)``
-    rows ``[rvec, t]``. Residual order: per view, per point, ``(du, dv)``.
-
-    The refinement works on all views at once (:meth:`residuals_stacked`,
-    :meth:`linearize_stacked`): the projection and its Jacobian are written out in numpy over
-    every point of every view (one ``cv2.Rodrigues`` per view for the rotation's derivative),
-    instead of one ``cv2.projectPoints`` call per view and step (~40x fewer Python-level calls
-    for 40 views). :meth:`residuals` (through :func:`~dtscal_lib.camera.project_points`) is the
-    independent reference the tests check it against; :meth:`linearize` gives the same numbers
-    split per view.
-    """
-
-    def __init__(self, obj, img, skew, dist_idx):
-        self.obj3 = [np.column_stack([o, np.zeros(len(o))]) for o in obj]
-        self.img = img
-        self.skew, self.dist_idx = skew, list(dist_idx)
-        self.n_intr = 4 + int(skew) + len(dist_idx)
-        counts = np.array([len(o) for o in obj])
-        self.counts = counts
-        self.starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
-        self.view = np.repeat(np.arange(len(obj)), counts)
-        xy = np.concatenate([np.asarray(o, dtype=np.float64)[:, :2] for o in obj])
-        self.x, self.y = xy[:, 0].copy(), xy[:, 1].copy()
-        self.observed = np.concatenate([np.asarray(m, dtype=np.float64).reshape(-1, 2) for m in img])
-
-    def residuals(self, theta, poses) -> list[np.ndarray]:
-        """Per view (N_i, 2) ``projected - observed`` pixels (skew honoured), view by view."""
-        K, dist = _unpack(theta, self.skew, self.dist_idx)
-        return [project_points(o, p[:3], p[3:], K, dist) - m for o, p, m in zip(self.obj3, poses, self.img)]
-
-    def _camera_points(self, poses, jacobian: bool):
-        """Board points in the camera frame, (P, 3), and (with ``jacobian``) d Xc / d rvec, (P, 3, 3)."""
-        poses = np.asarray(poses, dtype=np.float64)
-        R, dR = _rodrigues(poses[:, :3], jacobian)
-        R = R[self.view]  # (P, 3, 3)
-        t = poses[:, 3:][self.view]
-        Xc = R[:, :, 0] * self.x[:, None] + R[:, :, 1] * self.y[:, None] + t
-        if not jacobian:
-            return Xc, None
-        dR = dR[self.view]  # (P, k, i, j) = dR_ij / d r_k
-        dXc_dr = (dR[:, :, :, 0] * self.x[:, None, None] + dR[:, :, :, 1] * self.y[:, None, None]).transpose(0, 2, 1)
-        return Xc, dXc_dr
-
-    def residuals_stacked(self, theta, poses) -> np.ndarray:
-        """``projected - observed`` pixels of all views, (P, 2) (skew honoured)."""
-        return self._project(theta, poses, jacobian=False)[0]
-
-    def linearize_stacked(self, theta, poses):
-        """Residuals (P, 2), d residual / d intrinsics (P, 2, n_intr), d residual / d pose (P, 2, 6)."""
-        return self._project(theta, poses, jacobian=True)
-
-    def _project(self, theta, poses, jacobian: bool):
-        K, dist = _unpack(theta, self.skew, self.dist_idx)
-        fx, fy, cx, cy, s = K[0, 0], K[1, 1], K[0, 2], K[1, 2], K[0, 1]
-        k1, k2, p1, p2, k3 = dist
-        Xc, dXc_dr = self._camera_points(poses, jacobian)
-        iz = 1.0 / Xc[:, 2]
-        xp, yp = Xc[:, 0] * iz, Xc[:, 1] * iz
-        xx, yy, xy = xp * xp, yp * yp, xp * yp
-        r2 = xx + yy
-        rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = xp * rad + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xx)
-        yd = yp * rad + p1 * (r2 + 2.0 * yy) + 2.0 * p2 * xy
-        r = np.empty((len(xp), 2))
-        r[:, 0] = fx * xd + s * yd + cx - self.observed[:, 0]
-        r[:, 1] = fy * yd + cy - self.observed[:, 1]
-        if not jacobian:
-            return r, None, None
-        # distortion: d(xd, yd) / d(xp, yp)
-        drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3))  # d rad / d r2, times 2
-        dxd_dxp = rad + xx * drad + 2.0 * p1 * yp + 6.0 * p2 * xp
-        dxd_dyp = xy * drad + 2.0 * p1 * xp + 2.0 * p2 * yp
-        dyd_dxp = dxd_dyp
-        dyd_dyp = rad + yy * drad + 6.0 * p1 * yp + 2.0 * p2 * xp
-        # pixels: u = fx xd + s yd + cx, v = fy yd + cy; d(u, v) / d(xp, yp)
-        du_dxp, du_dyp = fx * dxd_dxp + s * dyd_dxp, fx * dxd_dyp + s * dyd_dyp
-        dv_dxp, dv_dyp = fy * dyd_dxp, fy * dyd_dyp
-        # d(xp, yp) / d Xc = [[iz, 0, -xp iz], [0, iz, -yp iz]]
-        dq = np.empty((len(xp), 2, 3))
-        dq[:, 0, 0], dq[:, 0, 1] = du_dxp * iz, du_dyp * iz
-        dq[:, 0, 2] = -(du_dxp * xp + du_dyp * yp) * iz
-        dq[:, 1, 0], dq[:, 1, 1] = dv_dxp * iz, dv_dyp * iz
-        dq[:, 1, 2] = -(dv_dxp * xp + dv_dyp * yp) * iz
-        Je = np.empty((len(xp), 2, 6))
-        Je[:, :, :3] = dq @ dXc_dr
-        Je[:, :, 3:] = dq  # d Xc / d t = I
-        Ji = np.zeros((len(xp), 2, self.n_intr))
-        Ji[:, 0, 0] = xd
-        Ji[:, 1, 1] = yd
-        Ji[:, 0, 2] = 1.0
-        Ji[:, 1, 3] = 1.0
-        col = 4
-        if self.skew:
-            Ji[:, 0, 4] = yd
-            col = 5
-        terms = {0: (xp * r2, yp * r2), 1: (xp * r2 * r2, yp * r2 * r2), 2: (2.0 * xy, r2 + 2.0 * yy),
-                 3: (r2 + 2.0 * xx, 2.0 * xy), 4: (xp * r2 ** 3, yp * r2 ** 3)}
-        for c, i in enumerate(self.dist_idx, start=col):
-            dxd, dyd = terms[i]
-            Ji[:, 0, c] = fx * dxd + s * dyd
-            Ji[:, 1, c] = fy * dyd
-        return r, Ji, Je
-
-    def linearize(self, theta, poses):
-        """Residual vectors and Jacobian blocks per view.
-
-        Returns lists of ``r`` (2N_i,), ``Ji`` (2N_i, n_intr), ``Je`` (2N_i, 6).
-        """
-        r, Ji, Je = self.linearize_stacked(theta, poses)
-        cuts = self.starts[1:]
-        return ([a.ravel() for a in np.split(r, cuts)], [a.reshape(-1, self.n_intr) for a in np.split(Ji, cuts)],
-                [a.reshape(-1, 6) for a in np.split(Je, cuts)])
-
-    def normal_blocks(self, r, Ji, Je):
-        """:func:`_normal_blocks` of the stacked arrays of :meth:`linearize_stacked`."""
-        n = self.n_intr
-        Ji2, r2 = Ji.reshape(-1, n), r.ravel()
-        A = Ji2.T @ Ji2
-        gi = Ji2.T @ r2
-        if np.all(self.counts == self.counts[0]):  # the usual case (every view sees the whole board)
-            V = len(self.counts)
-            Jiv, Jev, rv = Ji.reshape(V, -1, n), Je.reshape(V, -1, 6), r.reshape(V, -1, 1)
-            JevT = Jev.transpose(0, 2, 1)
-            return A, Jiv.transpose(0, 2, 1) @ Jev, JevT @ Jev, gi, (JevT @ rv)[:, :, 0]
-        Bs = np.add.reduceat(np.einsum("pai,paj->pij", Ji, Je), self.starts, axis=0)
-        Cs = np.add.reduceat(np.einsum("pai,paj->pij", Je, Je), self.starts, axis=0)
-        gv = np.add.reduceat(np.einsum("pai,pa->pi", Je, r), self.starts, axis=0)
-        return A, Bs, Cs, gi, gv
-
-    def blocks(self, theta, poses) -> NormalBlocks:
-        """The normal equations at ``(theta, poses)`` block by block, with each view's share (``O(V)`` memory)."""
-        r, Ji, Je = self.linearize_stacked(theta, poses)
-        A, Bs, Cs, _, _ = self.normal_blocks(r, Ji, Je)
-        n = self.n_intr
-        if np.all(self.counts == self.counts[0]):  # every view sees the whole board: batched products
-            Jiv = Ji.reshape(len(self.counts), -1, n)
-            JivT = Jiv.transpose(0, 2, 1)
-            A_views, g = JivT @ Jiv, (JivT @ r.reshape(len(self.counts), -1, 1))[:, :, 0]
-        else:
-            A_views = np.add.reduceat(np.einsum("pai,paj->pij", Ji, Ji), self.starts, axis=0)
-            g = np.add.reduceat(np.einsum("pai,pa->pi", Ji, r), self.starts, axis=0)
-        dof = r.size - (self.n_intr + 6 * len(self.counts))  # > 0: checked on entry to calibrate()
-        return NormalBlocks(A, Bs, Cs, A_views, g, _cost(r) / dof, _param_names(self.skew, self.dist_idx))
-
-
-def _normal_blocks(rs, Jis, Jes):
-    """``A = sum Ji^T Ji``, ``B_v = Ji^T Je``, ``C_v = Je^T Je``, gradients ``g_i``, ``g_v``."""
-    A = sum(Ji.T @ Ji for Ji in Jis)
-    Bs = np.stack([Ji.T @ Je for Ji, Je in zip(Jis, Jes)])
-    Cs = np.stack([Je.T @ Je for Je in Jes])
-    gi = sum(Ji.T @ r for Ji, r in zip(Jis, rs))
-    gv = np.stack([Je.T @ r for Je, r in zip(Jes, rs)])
-    return A, Bs, Cs, gi, gv
-
-
-def _schur_solve(A, Bs, Cs, gi, gv, lam):
-    """Solve the Marquardt-damped normal equations ``(J^T J + lam diag) d = -J^T r`` via Schur."""
-    Ad = A + lam * np.diag(np.maximum(np.diag(A), 1e-12))
-    cd = np.maximum(np.einsum("vii->vi", Cs), 1e-12)
-    Cd = Cs + lam * np.einsum("vi,ij->vij", cd, np.eye(6))
-    Cinv = np.linalg.inv(Cd)
-    BCi = np.einsum("vij,vjk->vik", Bs, Cinv)  # (V, n, 6)
-    S = Ad - np.einsum("vij,vkj->ik", BCi, Bs)
-    rhs = -gi + np.einsum("vij,vj->i", BCi, gv)
-    di = np.linalg.solve(S, rhs)
-    dv = -np.einsum("vij,vj->vi", Cinv, gv + np.einsum("vji,j->vi", Bs, di))
-    return di, dv
-
-
-def _cost(r: np.ndarray) -> float:
-    return float(np.einsum("ij,ij->", r, r))
-
-
-def _refine(problem: _Problem, theta, poses, max_iter: int = 200):
-    """Levenberg-Marquardt with Marquardt's diagonal scaling; returns ``theta, poses, iterations``.
-
-    A trial step costs only the residuals; the Jacobian is computed once a step is accepted.
-    """
-    r, Ji, Je = problem.linearize_stacked(theta, poses)
-    cost = _cost(r)
-    lam = 1e-3
-    it = 0
-    for it in range(1, max_iter + 1):
-        A, Bs, Cs, gi, gv = problem.normal_blocks(r, Ji, Je)
-        improved = False
-        while lam < 1e16:
-            try:
-                di, dv = _schur_solve(A, Bs, Cs, gi, gv, lam)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            t_new, p_new = theta + di, poses + dv
-            if t_new[0] <= 0 or t_new[1] <= 0:
-                lam *= 10.0
-                continue
-            try:
-                with np.errstate(all="ignore"):
-                    cost_new = _cost(problem.residuals_stacked(t_new, p_new))
-            except cv2.error:
-                lam *= 10.0
-                continue
-            if np.isfinite(cost_new) and cost_new <= cost:
-                improved = True
-                break
-            lam *= 10.0
-        if not improved:
-            break
-        small_step = np.all(np.abs(di) <= 1e-12 * (np.abs(theta) + 1e-6)) and np.all(
-            np.abs(dv) <= 1e-12 * (np.abs(poses) + 1e-6)
-        )
-        stalled = cost - cost_new <= 1e-16 * cost
-        theta, poses, cost = t_new, p_new, cost_new
-        lam = max(lam / 10.0, 1e-12)
-        if small_step or stalled or cost == 0.0:
-            break
-        r, Ji, Je = problem.linearize_stacked(theta, poses)
-    return theta, poses, it
-
-
-def _intrinsic_covariance(problem: _Problem, theta, poses):
-    """``sigma^2``, the intrinsics' honest covariance, the noise model's ``sigma^2 S^-1`` and the method in words.
-
-    See :mod:`dtscal_lib.covariance`: the larger of the noise model and a CR2 sandwich over the views.
-    """
-    blocks = problem.blocks(theta, poses)
-    cov, noise, method = honest_intrinsic_covariance(blocks)
-    return blocks.sigma2, cov, noise, method
 
 
 # =========================================================================== entry point
@@ -923,6 +402,7 @@ def _calibrate(obj, img, size, model: str, skew: bool, fix_k3: bool, initial) ->
         n_points=int(npts.sum()),
         sigma=float(np.sqrt(sigma2)),
         iterations=iters,
+        converged=not problem.capped,
         object_points=obj,
         image_points=img,
         std_noise_model=std_noise,
@@ -1046,25 +526,6 @@ def _refine_from_best_start(problem: "_Problem", Hs, obj, img, size, skew: bool,
     _, theta, poses, it = min(trials, key=lambda trial: trial[0])
     theta, poses, more = _refine(problem, theta, poses)
     return theta, poses, it + more
-
-
-def board_normal_spread(rvecs) -> float:
-    """Largest angle (degrees) between a board normal and the mean normal of all views.
-
-    Parameters
-    ----------
-    rvecs : (V, 3) Rodrigues vectors, board -> camera
-
-    Returns
-    -------
-    float, degrees; 0 when every board is parallel to every other.
-    """
-    rv = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
-    normals = np.array([cv2.Rodrigues(r.reshape(3, 1))[0][:, 2] for r in rv])
-    normals *= np.where(normals[:, 2:3] < 0, -1.0, 1.0)  # one side of the board
-    mean = normals.mean(axis=0)
-    mean /= np.linalg.norm(mean)
-    return float(np.degrees(np.arccos(np.clip(normals @ mean, -1.0, 1.0))).max())
 
 
 def _check_tilt_spread(rvecs) -> None:

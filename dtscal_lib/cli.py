@@ -101,25 +101,26 @@ def cmd_calibrate_intrinsics(args) -> int:
                                robot=args.robot, out_dir=None if args.no_write else args.out, topic=args.topic,
                                progress=_progress(not args.quiet, "frames"), keep_anyway=args.keep_anyway,
                                max_seconds=args.max_seconds, image_size=parse_image_size(args.image_size))
-    from .report import quality_for_run  # verdict; warnings on stderr; figures + index.html with --report
+    from .report import quality_for_run  # the session's verdict: warnings on stderr; figures + index.html with --report
 
     quality = quality_for_run(run, args.report)
     xval = _cross_validate(args, run)
     committed, failed = _commit(args, run, "intrinsics")
     if args.json:
-        _print_json({**run.to_dict(), "quality": quality.to_dict(), "cross_validation": xval,
-                     "report": str(quality.report_path) if quality.report_path else None,
+        _print_json({**run.to_dict(), "quality": quality and quality.to_dict(), "cross_validation": xval,
+                     "report": str(quality.report_path) if quality and quality.report_path else None,
                      "commit": committed, "commit_error": failed and str(failed)})
     else:
         r = run.result
         print(f"calibrated {run.robot}: {run.samples} samples from {run.tally.total} frames "
-              f"({run.source}); rms {r.rms:.3f} px; verdict {quality.verdict}")
+              f"({run.source}); rms {r.rms:.3f} px; verdict {quality.verdict if quality else 'none'}")
         names = ["fx", "fy", "cx", "cy"] + (["skew"] if r.skew else [])
         vals = [r.K[0, 0], r.K[1, 1], r.K[0, 2], r.K[1, 2]] + ([r.K[0, 1]] if r.skew else [])
         for n, v in zip(names, vals):
             print(f"  {n:5s} = {v:10.4f} +- {r.std.get(n, float('nan')):.4f}")
         print("  dist  = [" + ", ".join(f"{d:.6f}" for d in r.dist) + "]")
-        print("\n".join(quality.summary_lines(r.std_method)))  # sigma's method, what it means for a robot
+        if quality is not None:
+            print("\n".join(quality.summary_lines(r.std_method)))  # sigma's method, what it means for a robot
         if xval is not None:
             print(f"  cross-validation ({len(xval['ratios'])} random half splits): half-set difference / "
                   "predicted sigma")
@@ -131,7 +132,7 @@ def cmd_calibrate_intrinsics(args) -> int:
             print("  frames skipped: " + ", ".join(f"{k} {v}" for k, v in sorted(run.tally.rejected.items())))
         if run.path:
             print(f"wrote {run.path}")
-        if quality.report_path:
+        if quality is not None and quality.report_path:
             print(f"wrote {quality.report_path}")
         if committed:
             print(f"committed to {run.robot}: {committed}")

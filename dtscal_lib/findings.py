@@ -14,8 +14,9 @@ True
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Callable
 
-__all__ = ["Finding", "SEVERITIES"]
+__all__ = ["Finding", "SEVERITIES", "Evidence"]
 
 #: the severities, mildest first: a verdict is the worst severity of its findings ("good" when none)
 SEVERITIES = ("good", "doubtful", "bad")
@@ -60,3 +61,20 @@ class Finding:
 
     def __contains__(self, words: str) -> bool:
         return words in str(self)
+
+
+@dataclass
+class Evidence:
+    """What the verdict needs from the estimator, passed in (:func:`dtscal_lib.result.evidence` makes it), so
+    that the judge never calls back into the module that calibrated.
+
+    blocks : the normal equations at the solution (:class:`~dtscal_lib.covariance.NormalBlocks`), for the
+        projection uncertainty; None for OpenCV's models and when not asked for
+    tilt_spread_deg : largest angle between a board normal and their mean (degrees)
+    refit : ``refit(object_points, image_points) -> result``: calibrate other views the same way (the
+        checks that leave a column, a row or single corners out)
+    """
+
+    blocks: Any
+    tilt_spread_deg: float
+    refit: Callable[[list, list], Any]

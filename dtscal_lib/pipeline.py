@@ -71,6 +71,9 @@ class IntrinsicRun:
     doubts: list = field(default_factory=list)
     #: the session that made it (judge, write in another format, commit)
     session: IntrinsicSession | None = field(default=None, repr=False)
+    #: the session's verdict (:class:`~dtscal_lib.quality.Quality`), computed before anything was written, or
+    #: why there is none (a str; the gate then refused the file unless kept anyway)
+    quality: object = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
         out = self.result.to_dict()
@@ -134,7 +137,7 @@ def calibrate_intrinsics(source_spec, *, board: Board = DUCKIETOWN_BOARD, model:
     session.skipped(getattr(src, "bad", {}))  # corrupt frames a live source skipped
     result = session.calibrate()
     run = IntrinsicRun(result, session.robot, session.tally(), result.n_views, session.bars(), session.source,
-                       session=session)
+                       session=session, quality=session.quality())  # the verdict, before anything is written
     run.path = session.write(out_dir, keep_anyway)
     run.doubts = session.doubts
     return run

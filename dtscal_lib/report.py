@@ -42,7 +42,7 @@ from matplotlib.figure import Figure
 from .figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
 
 from .errors import DtscalError
-from .quality import REGION_NAMES, Quality, assess
+from .quality import REGION_NAMES, Quality
 
 __all__ = ["fig_view_rms", "fig_worst_residuals", "fig_residual_histogram", "fig_uncertainty_map", "fig_coverage",
            "write_report", "show", "quality_for_run", "FIGURES"]
@@ -51,7 +51,7 @@ _VERDICT_COLOUR = {"good": "#1a7f37", "doubtful": "#b35900", "bad": "#c62828"}
 
 
 def _q(result, quality: Quality | None) -> Quality:
-    return assess(result) if quality is None else quality
+    return result.quality() if quality is None else quality
 
 
 def _image_axes(ax, size) -> None:
@@ -293,17 +293,22 @@ th{{text-align:left;padding-right:1em}} img{{max-width:100%}} figure{{margin:1.5
 _RAW = {"fx, fy", "cx, cy", "noise model", "more data would help most"}
 
 
-def quality_for_run(run, report_dir=None, *, stream=None) -> Quality:
-    """The CLI's step after ``calibrate-intrinsics``: judge the run, print warnings, write the report.
+def quality_for_run(run, report_dir=None, *, stream=None) -> Quality | None:
+    """The CLI's step after ``calibrate-intrinsics``: the session's verdict, as warnings and the report page.
 
-    Every finding of a verdict that is not good goes to ``stream`` (default stderr) as one
-    ``dtscal: warning: ...`` line saying what to do; with ``report_dir`` the figures and
-    ``index.html`` are written there and the page's path is returned as ``quality.report_path``.
+    The verdict is the session's (:meth:`dtscal_lib.session.IntrinsicSession.quality`), computed before
+    anything was written; it is not computed again here. Every finding of a verdict that is not good goes
+    to ``stream`` (default stderr) as one ``dtscal: warning: ...`` line saying what to do; with
+    ``report_dir`` the figures and ``index.html`` are written there and the page's path is returned as
+    ``quality.report_path``. None when the session could give no verdict (kept with ``--keep-anyway``).
     """
     import sys
 
     stream = sys.stderr if stream is None else stream
-    q = run.result.quality()
+    q = run.quality
+    if not isinstance(q, Quality):
+        print(f"dtscal: warning: {q}", file=stream)
+        return None
     for w in q.warnings():
         print(f"dtscal: warning: {w}", file=stream)
     if report_dir is not None:

@@ -57,6 +57,10 @@ MIN_SAMPLES = 3
 OUTLIER_FACTOR = VIEW_OUTLIER_FACTOR
 #: never drop more than this share of the views as outliers
 MAX_OUTLIER_SHARE = 0.2
+#: frames without the declared board kept to name the board that is there, and how far from the declared
+#: counts of inner corners the search goes (a 9x6 board declared 9x5, 10x6, 7x6 or 11x8 is named)
+MISSED_KEPT = 4
+SIZE_SEARCH = 2
 
 
 # --------------------------------------------------------------------------- the robot's name: one rule
@@ -124,11 +128,21 @@ def _gate(session, *, writing: bool, keep_anyway: bool = False) -> tuple[str, li
     ``writing=False`` (only judging) accepts a missing robot name; a refused result raises
     :class:`~dtscal_lib.errors.ImplausibleCalibrationError` unless ``keep_anyway`` (never for COMMIT:
     its caller passes ``keep_anyway=False``)."""
-    refusals = session.refusals()
+    refusals = session.refusals() + _no_verdict(session)
     robot = calib_files.check_robot_name(session.robot) if writing else (session.robot or "camera")
     if refusals and not keep_anyway:
         raise _refusal(refusals, session.kind, robot)
     return robot, refusals
+
+
+def _no_verdict(session) -> list[Finding]:
+    """The verdict step, run before anything is written: a calibration whose verdict failed is refused."""
+    verdict = getattr(session, "quality", None)
+    q = verdict() if verdict is not None else None
+    if not isinstance(q, str):
+        return []
+    return [Finding("no_verdict", "bad", f"the kit could not judge this calibration: {q}",
+                    "report it with the recording; the camera computed is printed above")]
 
 
 def _refusal(refusals, kind: str, robot: str) -> ImplausibleCalibrationError:
@@ -284,15 +298,20 @@ def calibrate_without_outlier_views(object_points, image_points, image_size, **k
 
 
 def assess_quality(result):
-    """The calibration's verdict (:func:`dtscal_lib.quality.assess`), or its failure as a message (a str).
+    """The calibration's verdict, or its failure as a message (a str): the session's verdict step.
 
-    The verdict is extra information: a failing assessment must never lose the calibration.
+    Two steps: what the judge needs from the estimator (:func:`dtscal_lib.result.evidence`: the normal
+    equations, the boards' tilt, a way to calibrate other views alike), then the judge
+    (:func:`dtscal_lib.quality.assess`), which never calls back into the estimator. A failing verdict
+    never loses the calibration: it becomes a message, and the session's gate refuses to write or commit a
+    calibration without a verdict unless kept anyway (:func:`_gate`).
     """
     from .quality import assess
+    from .result import evidence
 
     try:
-        return assess(result)
-    except Exception as exc:  # the verdict is extra information: it must never lose the calibration
+        return assess(result, evidence(result))
+    except Exception as exc:  # never lose the calibration: the gate refuses it, --keep-anyway keeps it
         return f"no verdict ({type(exc).__name__}: {exc})"
 
 
@@ -333,6 +352,9 @@ class IntrinsicSession:
         self._refusals: list[Finding] | None = None
         #: found detections by the bigger pattern the saddles showed around them (None: the declared size)
         self._patterns: Counter = Counter()
+        #: a few frames where the declared board was not found (spread over the run), to name the board that is there
+        self._missed: list = []
+        self._n_missed = 0
 
     # ---- frames
     def offer(self, frame) -> Offer:
@@ -361,6 +383,7 @@ class IntrinsicSession:
         if not det.found:
             reason = det.reason or Reason.NO_BOARD
             group.tally.reject(reason)
+            self._keep_missed(img)
             return Offer(False, reason, det, img)
         with self.lock:
             group.found += 1
@@ -397,6 +420,42 @@ class IntrinsicSession:
                 f"({cols}x{rows} inner corners are seen), so each view would be a part of the board found at some "
                 f"place on it and the calibration meaningless. Nothing was calibrated: pass --board {cols}x{rows} "
                 "(count the inner corners, where four squares meet)", reason=Reason.BOARD_SIZE)
+
+    def _keep_missed(self, img) -> None:
+        """Keep at most :data:`MISSED_KEPT` frames without the declared board, spread over the run (the 1st, 2nd,
+        4th, 8th, ... missed frame), for :meth:`_board_there`."""
+        with self.lock:
+            self._n_missed += 1
+            n = self._n_missed
+            if n & (n - 1) == 0:  # a power of two
+                self._missed = (self._missed + [img])[-MISSED_KEPT:]
+
+    def _board_there(self) -> tuple[int, int] | None:
+        """The board size (inner corners) the missed frames show, when the declared one was never found.
+
+        Sizes near the declared one (each count within :data:`SIZE_SEARCH` of it, either way round) are looked
+        for with the kit's detector, the nearest first; a size found in a frame is the answer, or the larger
+        pattern its saddles continue into (:attr:`~dtscal_lib.detect.Detection.pattern_seen`).
+        """
+        with self.lock:
+            frames = list(self._missed)
+        c0, r0 = self.board.cols, self.board.rows
+        sizes = {(c, r) for c in range(c0 - SIZE_SEARCH, c0 + SIZE_SEARCH + 1)
+                 for r in range(r0 - SIZE_SEARCH, r0 + SIZE_SEARCH + 1) if c >= 3 and r >= 3 and c != r}
+        sizes |= {(r, c) for c, r in sizes}
+        sizes.discard((c0, r0))
+        def order(cr):  # nearest the declared first, the declared way round, the larger
+            return abs(cr[0] - c0) + abs(cr[1] - r0), (cr[0] > cr[1]) != (c0 > r0), -cr[0] * cr[1]
+
+        for cols, rows in sorted(sizes, key=order):
+            for img in frames:
+                try:
+                    det = detect_board(img, Board(cols, rows, self.board.square))
+                except (DtscalError, cv2.error):
+                    continue
+                if det.found:
+                    return det.pattern_seen or (cols, rows)
+        return None
 
     def skipped(self, counts) -> None:
         """Count frames a source skipped itself (corrupt frames of a live camera), by reason."""
@@ -475,6 +534,13 @@ class IntrinsicSession:
             raise DtscalError(f"{self.source}: no readable frame ({tally.total} frames, rejected: "
                               f"{dict(tally.rejected) or 'none'}); check the path and the topic")
         if len(obj) < MIN_SAMPLES:
+            there = self._board_there()
+            if there is not None:
+                raise CalibrationError(
+                    f"the declared {self.board.cols}x{self.board.rows} board was never found in {self.source} "
+                    f"({tally.total} frames), but a {there[0]}x{there[1]} board (inner corners) is there. Nothing was "
+                    f"calibrated: pass --board {there[0]}x{there[1]} (count the inner corners, where four squares "
+                    "meet)", reason=Reason.BOARD_SIZE)
             raise CalibrationError(
                 f"only {len(obj)} usable view(s) of the {self.board.describe()} board in {self.source} "
                 f"({tally.total} frames; rejected: {dict(tally.rejected)}). Calibration needs at least "
@@ -514,7 +580,7 @@ class IntrinsicSession:
     @property
     def doubts(self) -> list[Finding]:
         """The refusals (empty before CALIBRATE and for a believable result); ``str()`` of each says what to do."""
-        return [] if self.result is None else list(self.refusals())
+        return [] if self.result is None else list(self.refusals()) + _no_verdict(self)
 
     def quality(self, known=None):
         """The verdict (:class:`~dtscal_lib.quality.Quality`, or a message when it cannot be made).
@@ -537,9 +603,7 @@ class IntrinsicSession:
         """Verdict and refusals together: the verdict's findings, then the refusals (:meth:`refusals`, the
         plausibility doubts). A result with refusals is not written unless kept anyway."""
         q = self.quality()
-        verdict = list(getattr(q, "findings", [])) if not isinstance(q, str) else [
-            Finding("no_verdict", "doubtful", q, "the calibration itself is kept; check it with --report")]
-        return verdict + self.refusals()
+        return (list(q.findings) if not isinstance(q, str) else _no_verdict(self)) + self.refusals()
 
     # ---- write, commit
     def calibration(self) -> calib_files.IntrinsicCalibration | None:

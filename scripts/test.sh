@@ -2,7 +2,7 @@
 # Install everything the tests need, then run them all: unit and integration tests, the
 # slow end-to-end tests (real ROS master, rosbag play, student notebooks), and the solution
 # notebooks under nbval with their stored outputs compared, the docstring examples of dtscal_lib, and
-# the lint (ruff).
+# the lint (ruff) and the type check (mypy, scripts/typecheck.py: never more errors than its baseline).
 #
 # pytest runs once, on 2 pytest-xdist workers, a file per worker at a time (tests/conftest.py orders the
 # longest files first). No test measures time, so none needs the machine to itself. Extra arguments go to
@@ -15,5 +15,7 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh --test
 echo "ruff check ." >&2
 .venv/bin/ruff check .          # lint (config in pyproject.toml); any finding fails the run
+echo "typecheck (mypy)" >&2
+.venv/bin/python scripts/typecheck.py   # the library core, detect/, grading/: never more errors than scripts/mypy-baseline.txt
 exec .venv/bin/python -m pytest tests solutions --doctest-modules dtscal_lib --nbval --nbval-current-env \
   --nbval-sanitize-with solutions/nbval_sanitize.cfg -n 2 --dist loadfile --no-loadscope-reorder "$@"

@@ -40,6 +40,20 @@ def test_a_board_declared_too_small_is_named_with_the_size_to_pass(tmp_path, dec
     assert not (tmp_path / "c" / "camera_intrinsic" / "bot.yaml").exists()
 
 
+@pytest.mark.parametrize("declared", ["9x5", "10x6"])
+def test_a_declared_board_never_found_is_refused_naming_the_size_that_is_there(tmp_path, declared):
+    """9x5 (a row too few) and 10x6 (a column too many) are never found on the 9x6 board at all, so no saddle
+    pattern continues past them: the refusal names the size found near the declared one (issue 31; it used to
+    say "only 0 usable views ... check --board"). Exit 2, nothing written, no number of pixels."""
+    p = dtscal("calibrate-intrinsics", "--source", f"{LEFT}/*.jpg", "--board", declared, "--out", tmp_path / "c",
+               "-q", "--robot", "bot")
+    assert p.returncode == 2, p.stderr
+    assert f"the declared {declared} board was never found" in p.stderr and "pass --board 9x6" in p.stderr, p.stderr
+    assert "Traceback" not in p.stderr
+    assert not re.search(r"\d+\.\d+ px", p.stdout + p.stderr), p.stdout + p.stderr
+    assert not (tmp_path / "c").exists() or not list((tmp_path / "c").rglob("*.yaml"))
+
+
 def test_the_right_size_sees_no_bigger_pattern_and_smaller_ones_see_the_board():
     """Every photograph: declared 9x6, no view shows more; declared 8x6, every view where the board is found does."""
     images = [cv2.imread(str(f)) for f in sorted(LEFT.glob("*.jpg"))]

@@ -517,3 +517,39 @@ def test_initial_must_fit_the_views():
     _, _, img = synth_views(dt.default_K(), dt.default_dist(), 4, seed=1)
     with pytest.raises(CalibrationError, match="poses"):
         calibrate([OBJ] * 4, img, SIZE, initial=(dt.default_K(), dt.default_dist(), np.zeros((3, 3)), np.ones((3, 3))))
+
+
+def test_the_refinement_converges_from_far_starts_and_says_so():
+    """Nothing used to assert convergence (issue 31: stopped after 10 iterations instead of 200, every test passed).
+    From starts whose focal lengths are 1.3, 1.6 and 2x the solution's, the refinement reaches the same camera and
+    stops on its own criteria (``converged``), not on its cap; the verdict calls a capped result bad."""
+    from dtscal_lib import lsq
+
+    K = dt.default_K()
+    rv, tv, img = synth_views(K, dt.default_dist(), 12, seed=5, noise=0.1)
+    ref = calibrate([OBJ] * 12, img, SIZE)
+    assert ref.converged and ref.iterations < lsq.MAX_ITERATIONS
+    for f in (1.3, 1.6, 2.0):
+        start = ref.K.copy()
+        start[0, 0] *= f
+        start[1, 1] *= f
+        res = calibrate([OBJ] * 12, img, SIZE, initial=(start, np.zeros(5), ref.rvecs, ref.tvecs))
+        assert res.converged, (f, res.iterations)
+        np.testing.assert_allclose(res.K, ref.K, rtol=1e-7)  # the same minimum, not a point on the way
+    capped = calibrate([OBJ] * 12, img, SIZE, initial=(2.0 * ref.K, np.zeros(5), ref.rvecs, ref.tvecs))
+    capped.converged = False  # as a capped refinement reports itself
+    f = next(f for f in capped.quality().findings if f.code == "not_converged")
+    assert f.severity == "bad"
+
+
+def test_excess_share_is_the_share_of_the_residual_above_the_noise():
+    """``(s^2 - s_c^2) / (s^2 - n^2)``, computed here by hand: a candidate that brings sigma 2 down to the noise 1
+    explains all of the excess (issue 31: 0.75 went unnoticed); one that halves the excess variance, half."""
+    from dtscal_lib.richer import excess_share
+
+    assert excess_share(2.0, 1.0, 1.0) == 1.0
+    assert excess_share(2.0, np.sqrt(2.5), 1.0) == pytest.approx((4.0 - 2.5) / (4.0 - 1.0))
+    assert excess_share(2.0, 2.0, 1.0) == 0.0
+    assert excess_share(2.0, 3.0, 1.0) == 0.0  # a worse candidate explains nothing (never negative)
+    assert excess_share(1.0, 0.5, 1.0) == 0.0  # at the noise already: nothing to explain
+    assert excess_share(3.0, 0.5, 1.0) == 1.0  # below the noise: all of it, never more

@@ -50,12 +50,13 @@ def test_docs_show_the_table_as_the_code_has_it():
 
 def test_the_verdict_reads_its_thresholds_from_the_table():
     """The verdict's thresholds are rows of the one table (issue 15: one judge), not constants of quality.py."""
-    for name in ("fit_ratio_doubtful", "fit_ratio_bad", "corner_sigma_doubtful", "corner_sigma_bad",
+    for name in ("fit_ratio_doubtful", "fit_ratio_bad", "corner_sigma_doubtful", "robot_view_sigma_doubtful",
+                 "robot_view_sigma_bad",
                  "view_outlier_factor", "offset_z", "offset_view_share", "radial_z", "radial_fraction",
                  "neighbour_correlation", "systematic_ratio_bad", "min_good_views"):
         assert getattr(quality, name.upper()) == limits.LIMITS[name].value, name
     assert quality.FIT_RATIO_DOUBTFUL < quality.FIT_RATIO_BAD
-    assert quality.CORNER_SIGMA_DOUBTFUL < quality.CORNER_SIGMA_BAD
+    assert quality.ROBOT_VIEW_SIGMA_DOUBTFUL < quality.ROBOT_VIEW_SIGMA_BAD
 
 
 def test_no_limit_cites_a_kit_test_as_its_source():

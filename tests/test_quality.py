@@ -82,7 +82,8 @@ def test_one_column_shifted_in_most_views_is_bad_and_named(session):
     assert set(f.views) == shifted  # exactly the shifted views are named
     size = float(f.message.split("offset by ")[1].split(" px")[0])
     assert 9.0 < size < 11.0
-    assert "drop views" in f.advice
+    # most views: the print or the detector, not a few frames to drop (issue 31)
+    assert "drop views" not in f.advice and "re-detect" in f.advice and "printed board" in f.advice
     # the echoes of the cause (radial pattern, correlated neighbours) are not reported as causes
     assert not any(f.code in ("radial", "neighbour_correlation") for f in q.findings)
     assert set(q.views_to_drop()) == shifted
@@ -245,7 +246,7 @@ def test_uncertainty_agrees_with_monte_carlo_recalibration(session):
     blocks = res.normal_blocks()
     noise_model = (blocks, blocks.sigma2 * np.linalg.inv(blocks.schur()))
     umap = quality.uncertainty_map(res, cov=noise_model)
-    runs = quality.monte_carlo_projection(res, umap.corners, runs=50, seed=1, distance=umap.distance)
+    runs = quality.monte_carlo_projection(res, umap.corners, res.refit, runs=50, seed=1, distance=umap.distance)
     dev = runs - runs.mean(axis=0)
     cov = np.einsum("rmi,rmj->mij", dev, dev) / (len(runs) - 1)
     mc = quality.worst_direction_sigma(cov)
@@ -262,8 +263,8 @@ def test_a_lens_model_that_folds_over_at_the_image_corners_is_bad_not_a_crash():
            for r, t in poses]
     q = calibrate([OBJ] * 4, img, dt.IMAGE_SIZE).quality()
     assert q.verdict == "bad"
-    f = next(f for f in q.findings if f.code == "uncertainty")
-    assert "cannot be inverted" in f.message and "image corners" in f.advice
+    f = next(f for f in q.findings if f.code == "robot_view")  # it folds over in the lower half too
+    assert "cannot be inverted" in f.message and "hold the board" in f.advice
     d = json.loads(json.dumps(q.to_dict()))  # NaN never reaches the JSON
     assert d["projection_uncertainty"]["corner_sigma_px"] is None
     assert 0 < d["projection_uncertainty"]["unprojectable_share"] < 1
@@ -287,15 +288,15 @@ def test_too_many_views_or_too_little_memory_is_a_clear_error_not_a_traceback(mo
     monkeypatch.setattr(calibration, "_calibrate", no_memory)
     with pytest.raises(CalibrationError, match="not enough memory to calibrate 8 views"):
         calibrate(obj, img, dt.IMAGE_SIZE)
-    monkeypatch.setattr(quality, "_assess", no_memory)
+    monkeypatch.setattr(quality, "run_rules", no_memory)
     with pytest.raises(CalibrationError, match="not enough memory to judge a calibration of 8 views"):
         res.quality()
 
 
 def test_quality_and_calibration_do_not_import_each_other_both_ways():
-    """quality gets what it needs from CalibrationResult's public methods (normal_blocks, refit, ...):
-    calibration imports quality (for result.quality()), quality never imports calibration, and the
-    shared covariance module imports neither."""
+    """The judge gets what it needs passed in (dtscal_lib.result.evidence: the normal equations, the tilt,
+    a refit): quality imports neither the estimator (calibration) nor its result module, the estimator does
+    not import the judge, and the shared covariance module imports neither."""
     import ast
     from pathlib import Path
 
@@ -309,6 +310,6 @@ def test_quality_and_calibration_do_not_import_each_other_both_ways():
                 out.update([node.module] if node.module else [a.name for a in node.names])
         return out
 
-    assert "calibration" not in imported("quality")
+    assert not {"calibration", "result"} & imported("quality")
     assert not {"calibration", "quality"} & imported("covariance")
-    assert "quality" in imported("calibration")
+    assert "quality" not in imported("calibration") and "result" in imported("calibration")

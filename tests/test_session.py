@@ -156,7 +156,8 @@ DRIVERS = {"cli", "pipeline", "ui.intrinsic", "ui.intrinsic_driver", "ui.extrins
            "ui.background", "ui.frameloop", "ui.render", "ui.archive"}
 DETECT = {"detect", "detect.classic", "detect.frame", "detect.grid", "detect.lattice", "detect.order", "detect.refine",
           "detect.saddles"}
-AREAS = {"detect": DETECT | {"coverage", "boards"}, "calibration": {"calibration", "camera", "ui.solver"},
+AREAS = {"detect": DETECT | {"coverage", "boards"},
+         "calibration": {"calibration", "closed_form", "lsq", "result", "camera", "ui.solver"},
          "judge": {"plausibility", "quality", "ground", "report"}, "files": {"calib_files", "safe_yaml"},
          "robot": {"robot"}}
 #: the steps of a calibration: only the session calls them
@@ -226,6 +227,11 @@ class Walk:
                     out.append(a)
         return out
 
+    def callbacks(self) -> list[tuple[str, str]]:
+        """Pairs of modules below the session that call each other: (A, B) when A calls B and B calls A."""
+        below = {(a, b) for a, b, _ in self.edges if self.layer(a) == 0 and self.layer(b) == 0}
+        return sorted((a, b) for a, b in below if (b, a) in below and a < b)
+
     def steps_called_by(self) -> dict[tuple[str, str], set[str]]:
         out: dict = {}
         for caller, callee, fn in self.edges:
@@ -263,8 +269,10 @@ def walk_the_live_calibrator(bag: Path, folder: Path, target: str) -> tuple[Walk
 
 
 def check_walk(walk: Walk, areas: list[str], steps: list[tuple[str, str]]) -> None:
-    """No climb; the session enters ``areas`` in that order, each once; ``steps`` are called by the session only."""
+    """No climb, no call back (a module below the session never calls a module that called it); the session
+    enters ``areas`` in that order, each once; ``steps`` are called by the session only."""
     assert walk.climbs() == []
+    assert walk.callbacks() == []
     assert walk.session_walk() == areas
     called = walk.steps_called_by()
     for step in steps:
@@ -358,3 +366,24 @@ def test_the_walk_to_the_robot_over_ros_goes_through_the_session(short_bag, tmp_
 
     for walk in (cli_walk, live_walk):
         check_walk(walk, ["detect", "calibration", "judge", "files", "robot"], ROBOT_STEPS)
+
+
+def test_the_cli_writes_nothing_when_the_verdict_step_fails(short_bag, tmp_path, monkeypatch, capsys):
+    """The verdict is a step of the session, computed before anything is written: when it fails (here the
+    judge raises), ``dtscal calibrate-intrinsics`` prints the camera, says why there is no verdict, exits 3
+    (refused) and writes no file; ``--keep-anyway`` keeps it only as ``ROBOT.rejected.yaml`` beside."""
+    from dtscal_lib import cli, quality
+
+    def broken_judge(result, evidence, **kw):
+        raise RuntimeError("the judge broke")
+
+    monkeypatch.setattr(quality, "assess", broken_judge)
+    out = tmp_path / "calibrations"
+    code = cli.main(["calibrate-intrinsics", "--source", str(short_bag), "--out", str(out), "-q"])
+    err = capsys.readouterr().err
+    assert code == REFUSED, err
+    assert "could not judge this calibration" in err and "the judge broke" in err
+    assert files_under(out) == []
+    code = cli.main(["calibrate-intrinsics", "--source", str(short_bag), "--out", str(out), "-q", "--keep-anyway"])
+    assert code == REFUSED
+    assert files_under(out) == ["camera_intrinsic/walkbot.rejected.yaml"]
