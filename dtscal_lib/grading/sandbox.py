@@ -57,7 +57,7 @@ import numpy as np
 
 from . import seccomp
 from .errors import GRADER_ERROR, GraderError
-from .harness import ANSWER_MARK, MAX_ANSWER_BYTES, MAX_BLOBS, MAX_HEADER_BYTES, CheckJob, SandboxJob
+from .harness import ANSWER_MARK, MAX_ANSWER_BYTES, MAX_BLOBS, MAX_HEADER_BYTES, CheckJob, SandboxJob, load_budget
 
 __all__ = ["CheckJob", "SandboxJob", "Call", "CheckRun", "SandboxRun", "GraderError", "GRADER_ERROR", "run_calls",
            "barriers"]
@@ -103,8 +103,9 @@ def validate_limits(wall_s, cpu_s, mem_mb) -> None:
 #: "bubblewrap" (default when bwrap runs here), "bare" (the harness without bubblewrap: what a
 #: machine without user namespaces gets; benchmarks compare the two)
 MODE: str | None = None
-#: time allowed for starting the sandbox and loading the submission
-LOAD_WALL_S = 30.0
+#: time allowed for loading the submission (the harness's first try; :func:`.harness.load_budget`
+#: bounds all tries), and what the grader allows on top for starting the sandbox and numpy
+LOAD_WALL_S, LOAD_MARGIN_S = 30.0, 15.0
 MAX_ARRAY_BYTES = MAX_ANSWER_BYTES
 
 
@@ -241,7 +242,19 @@ def last_answer(data: bytes) -> bytes | None:
 
 
 def decode_answers(data: bytes) -> list[Call] | None:
-    """The calls of one worker's answer frame, or None when it is not a well-formed frame."""
+    """The calls of one worker's answer frame, or None when it is not a well-formed frame.
+
+    Never raises: whatever the bytes hold (a JSON header nested 200,000 levels deep, which makes
+    the parser raise RecursionError; a 401-digit number, OverflowError as a float; a pickled
+    array, refused by ``allow_pickle=False``), a malformed frame is that check's unreadable
+    answer, the student's, never an error of the grader's."""
+    try:
+        return _decode_answers(data)
+    except Exception:  # noqa: BLE001 - untrusted bytes: any failure to decode is an unreadable answer
+        return None
+
+
+def _decode_answers(data: bytes) -> list[Call] | None:
     try:
         header, blobs, end = split_frame(data)
     except _Unreadable:
@@ -527,7 +540,7 @@ def _as_job(c) -> CheckJob:
                     substitute=list(c.get("substitute", ())))
 
 
-def run_calls(statements: list[tuple[str, int]], checks: list, *, blocked_paths=(),
+def run_calls(statements: list[tuple[str, int]], checks: list, *,
               mem_mb: int = MEM_MB, output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None) -> SandboxRun:
     """Run ``checks`` (:class:`CheckJob`, or dicts with the same keys) on the submission.
 
@@ -535,8 +548,6 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *, blocked_paths=
     ----------
     statements : the submission's import/def statements ``(source, first line)``
     checks : inputs only; the answers are judged by the caller
-    blocked_paths : folders the student process may not read (grading material, solutions);
-        with bubblewrap nothing outside the sandbox's own list is visible anyway
     workdir_files : ``{name: bytes}`` written into the working folder
 
     Returns
@@ -549,7 +560,8 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *, blocked_paths=
     ------
     GraderError
         when the sandbox failed on the grader's side :data:`RETRIES` times ("not graded: grader
-        error, rerun"; never the student's zero).
+        error, rerun"; never the student's zero); its ``run`` holds the checks answered before
+        the failure, which the caller keeps (only the unanswered ones are the grader's failure).
     """
     from .loader import CV2_DENY, KIT_ALLOWED
 
@@ -576,8 +588,10 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *, blocked_paths=
             errors.append(str(exc))
             time.sleep(0.2 * (attempt + 1))
         todo = [c for c in jobs if c.id not in run.checks]
-    if todo:
-        raise GraderError(f"{GRADER_ERROR} ({'; '.join(errors)[-600:]})")
+    if todo:  # the checks answered before the failure travel with it (the caller keeps them)
+        exc = GraderError(f"{GRADER_ERROR} ({'; '.join(errors)[-600:]})")
+        exc.run = run
+        raise exc
     return run
 
 
@@ -697,7 +711,8 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
     by_id = {c.id: c for c in job.checks}
     fd = proc.stdout.fileno()
     buf = bytearray()
-    deadline = time.monotonic() + job.load_wall + 10
+    # the harness answers "ready" within load_budget (it skips statements that load too slowly)
+    deadline = time.monotonic() + load_budget(job.load_wall) + LOAD_MARGIN_S
     hello = False
     while True:
         frame = _next_frame(fd, buf, deadline)
@@ -755,7 +770,7 @@ def _next_frame(fd: int, buf: bytearray, deadline: float):
                             not all(isinstance(s, int) and 0 <= s <= MAX_ANSWER_BYTES + MAX_HEADER_BYTES + 16
                                     for s in sizes):
                         return None
-                except (ValueError, KeyError, TypeError):
+                except (ValueError, KeyError, TypeError, RecursionError, OverflowError):
                     return None
                 need = 4 + n + sum(sizes)
         if need is not None and len(buf) >= need:
