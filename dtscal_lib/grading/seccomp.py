@@ -161,6 +161,7 @@ def sandbox_filter() -> bytes:
     for name in SANDBOX_DENY:
         _deny(p, name)
     _deny_if_arg(p, "fcntl", 1, FCNTL_DENY)
+    _deny_if_arg(p, "ioctl", 1, IOCTL_DENY)
     _deny(p, "clone3", errno.ENOSYS)
     _deny_if_flags(p, "clone", 0, CLONE_NEW_FLAGS)
     p.add(RET_K, RET_ALLOW)
