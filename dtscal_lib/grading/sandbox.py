@@ -411,8 +411,6 @@ def _build_manifest() -> Manifest:
     if os.path.isdir(m.dynload):
         m.dynload_kept = sorted(n for n in os.listdir(m.dynload) if n.split(".")[0] not in DYNLOAD_LEFT_OUT
                                 and os.path.isfile(os.path.join(m.dynload, n)))
-        m.files.update({os.path.join(m.dynload, n): os.path.join(m.dynload, n) for n in os.listdir(m.dynload)
-                        if n.startswith("_ssl")})
         elves += [os.path.join(m.dynload, n) for n in m.dynload_kept if n.endswith(".so")]
     for n in ("numpy", "numpy.libs"):
         d = os.path.join(site, n)
