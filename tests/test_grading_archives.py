@@ -303,10 +303,16 @@ def test_a_persistent_grader_failure_is_reported_as_such_never_as_a_zero(tmp_pat
     assert rows["lea"]["project_points"] == "0" and rows["lea"]["total"] == "0"  # a stub needs no sandbox
     assert GRADER_ERROR in rows["kim"]["notes"] and "simulated" in rows["kim"]["notes"]
     kim = json.loads((out / "r.json").read_text())["students"]["kim"]
-    assert kim["output"].startswith(GRADER_ERROR) and kim["extra_data"] == {"status": "grader error"}
+    # Gradescope's format: no score for what the grader could not run, and then none for the run
+    assert kim["output"].startswith(GRADER_ERROR) and kim["extra_data"] == {"status": "grader error",
+                                                                            "autograder_failed": True}
+    assert "score" not in kim and all("score" not in t for t in kim["tests"])
     assert all(t["output"].startswith(GRADER_ERROR) for t in kim["tests"])
+    lea = json.loads((out / "r.json").read_text())["students"]["lea"]
+    assert lea["score"] == 0 and all(t["score"] == 0 for t in lea["tests"])
     page = (out / "report" / "index.html").read_text()
     assert 'id="grader-errors"' in page and "kim" in page.split('id="grader-errors"')[1]
+    assert "mean total 0.0 / 10 points over the 1 fully graded" in page  # kim's total is not known yet
 
 
 

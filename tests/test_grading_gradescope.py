@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import zipfile
 
@@ -42,6 +43,31 @@ def test_run_autograder_grades_the_submission(autograder):
 def test_run_autograder_writes_results_for_an_unusable_submission(autograder):
     res = _run(autograder, {"notes.txt": b"I forgot my notebook"})
     assert res["score"] == 0 and "could not grade" in res["output"]
+
+
+GRADER_FAILS = """#!/usr/bin/env bash
+# stands in for the kit's Python: dtscal grade as it ends when the grader itself failed (exit status 3)
+while [ $# -gt 0 ]; do [ "$1" = --json ] && out="$2"; shift; done
+echo '{"extra_data": {"status": "grader error", "autograder_failed": true}, "output": "x", "tests": []}' > "$out"
+exit 3
+"""
+
+
+def test_a_grader_error_is_an_autograder_failure_on_gradescope(autograder, tmp_path):
+    """Gradescope shows "The autograder failed to execute correctly" when results.json is missing
+    (its Troubleshooting page): run_autograder withholds it when the grader failed, never a 0."""
+    fake = tmp_path / "python"
+    fake.write_text(GRADER_FAILS)
+    fake.chmod(0o755)
+    results = autograder / "results"
+    shutil.rmtree(results, ignore_errors=True)
+    (autograder / "submission").mkdir(exist_ok=True)
+    env = dict(os.environ, DTSCAL_AUTOGRADER_ROOT=str(autograder), DTSCAL_PYTHON=str(fake))
+    run = subprocess.run(["bash", str(autograder / "source" / "run_autograder")], env=env, capture_output=True,
+                         text=True, timeout=60)
+    assert run.returncode != 0 and "grader error" in run.stderr, run.stderr
+    assert not (results / "results.json").exists()
+    assert json.loads((results / "not-graded.json").read_text())["extra_data"]["autograder_failed"]
 
 
 # --------------------------------------------------------------------------- a student's hand-in, whole path

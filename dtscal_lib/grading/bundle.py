@@ -13,7 +13,10 @@ The zip holds the kit's library, the hidden cases (``grading/``) and the solutio
 in a bubblewrap sandbox that holds neither, or, where Gradescope's container allows no user
 namespace, as a bare process whose barriers ``results.json`` lists (docs/grading-sandbox.md:
 Gradescope's own per-submission container keeps other students out either way). ``run_autograder``
-always writes a results file, even if grading fails.
+writes a results file for every submission the grader could grade (one without a course notebook
+too: 0 with what to upload); when the grader itself failed (``dtscal grade`` exit status 3, or a
+traceback) it withholds ``results.json`` (kept as ``results/not-graded.json``), which Gradescope
+shows as an autograder failure, never as the student's 0.
 For a local test, ``DTSCAL_AUTOGRADER_ROOT`` replaces ``/autograder`` and ``DTSCAL_PYTHON``
 the virtual environment's Python.
 """
@@ -62,7 +65,7 @@ echo "setup.sh: done" >&2
 """
 
 RUN_AUTOGRADER = """#!/usr/bin/env bash
-# Gradescope runs this for every submission. It always leaves a results.json.
+# Gradescope runs this for every submission. It leaves a results.json unless the grader itself failed.
 ROOT="${{DTSCAL_AUTOGRADER_ROOT:-/autograder}}"
 PY="${{DTSCAL_PYTHON:-$ROOT/venv/bin/python}}"
 RESULTS="$ROOT/results/results.json"
@@ -74,6 +77,14 @@ rm -f "$RESULTS"
     --json "$RESULTS" {assignment}-q \\
     > "$ROOT/results/grade.log" 2>&1
 status=$?
+if [ "$status" -eq 3 ] || grep -q '^Traceback' "$ROOT/results/grade.log"; then
+  # the grader failed, not the student's code: no grade at all. Without results.json Gradescope shows
+  # "The autograder failed to execute correctly" (never a 0); the instructor reruns the submission.
+  [ -f "$RESULTS" ] && mv "$RESULTS" "$ROOT/results/not-graded.json"
+  echo "not graded: grader error, rerun (the grader failed, not the student's code): results/grade.log" >&2
+  cat "$ROOT/results/grade.log" >&2
+  exit 1
+fi
 if [ ! -s "$RESULTS" ]; then
   "$PY" - "$RESULTS" "$ROOT/results/grade.log" <<'EOF'
 import json, sys

@@ -64,7 +64,8 @@ def render(by_student: dict[str, list[GradeResult]], notes: dict | None = None) 
     notes = notes or {}
     dist, ranked = summarize(by_student)
     n = len(by_student)
-    totals = [sum(r.score for r in rs) for rs in by_student.values()]
+    # a student with a function the grader could not run has no total yet: not in the mean
+    totals = [sum(r.score for r in rs) for rs in by_student.values() if not any(r.grader_error for r in rs)]
     maximum = max((sum(r.max_score for r in rs) for rs in by_student.values()), default=0)
     rows = []
     for f, d in dist.items():
@@ -99,7 +100,8 @@ td.band {{ position: relative; min-width: 6em; }}
 .bar {{ position: absolute; left: 0; top: 0; bottom: 0; background: #9cc3e6; z-index: -1; }}
 </style></head><body>
 <h1>Class report</h1>
-<p id="summary">{n} student(s); mean total {mean_total:.1f} / {maximum:g} points.</p>
+<p id="summary">{n} student(s); mean total {mean_total:.1f} / {maximum:g} points{
+    "" if len(totals) == n else f" over the {len(totals)} fully graded"}.</p>
 {errors}<h2>Score distribution per function</h2>
 <p>Number of students whose points on the function fall in each band.</p>
 <table id="distribution"><thead><tr><th scope="col">function</th>{heads}<th scope="col">mean</th></tr></thead>

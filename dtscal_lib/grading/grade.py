@@ -333,35 +333,46 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
 def _run_and_judge(g: Grading, plan: list[Planned]) -> None:
     if not plan:
         return
-    run = _sandbox(g, [p.job for p in plan])
-    if run is None:  # the grader failed, not the student: these functions are not graded yet
-        for fr in {id(p.function): p.function for p in plan}.values():
-            fr.status, fr.diagnosis, fr.mistake = GRADER_ERROR_STATUS, "", None
-            fr.tests = [TestResult(t.name, t.function, 0.0, t.max_score, f"{GRADER_ERROR} ({g.res.grader_error})")
-                        for t in fr.tests]
-        return
+    run, lost = _sandbox(g, [p.job for p in plan])
+    # the grader failed, not the student: a function with a check that was never answered is not
+    # graded yet (its answered checks wait for the rerun too); a lost probe only costs the diagnosis
+    failed = {id(p.function): p.function for p in plan if p.job.id in lost and p.probe is None}
+    for fr in failed.values():
+        fr.status, fr.diagnosis, fr.mistake = GRADER_ERROR_STATUS, "", None
+        fr.tests = [TestResult(t.name, t.function, 0.0, t.max_score, f"{GRADER_ERROR} ({g.res.grader_error})")
+                    for t in fr.tests]
     for k, err in run.load_errors:
         where = g.sub.where(g.statements[k][1]) if k < len(g.statements) else "?"
         note = f"statement at {where} skipped: {_cell_lines(g.sub, err)}"
         if note not in g.res.notes:
             g.res.notes.append(note)
-    _judge(g, run, plan)
+    _judge(g, run, [p for p in plan if id(p.function) not in failed and p.job.id not in lost])
 
 
-def _sandbox(g: Grading, jobs: list[Job]) -> SandboxRun | None:
-    """The sandbox run of ``jobs``; a failure of the grader's side is retried, and None when it persists."""
+def _sandbox(g: Grading, jobs: list[Job]) -> tuple[SandboxRun, set[int]]:
+    """The sandbox run of ``jobs`` and the ids of those never answered: a failure of the grader's
+    side is retried (the unanswered jobs only, keeping the answers already given); what is still
+    unanswered after :data:`GRADER_ATTEMPTS` tries is the grader's failure, never a 0."""
     kw = {"mem_mb": g.limits.mem_mb} if g.limits.mem_mb else {}
-    errors = []
+    merged, errors, todo = SandboxRun(), [], list(jobs)
     for attempt in range(GRADER_ATTEMPTS):
         if attempt:
             time.sleep(GRADER_RETRY_PAUSE_S[min(attempt, len(GRADER_RETRY_PAUSE_S)) - 1])
         try:
-            return run_calls(g.statements, jobs, blocked_paths=g.material.blocked_paths, **kw)
+            run = run_calls(g.statements, todo, **kw)
         except Exception as exc:  # noqa: BLE001 - the sandbox itself failed (GraderError or worse): try again
             errors.append(f"{type(exc).__name__}: {str(exc).strip()[:300]}")
+            run = getattr(exc, "run", None)  # what it answered before it failed
+        if run is not None:
+            merged.checks.update(run.checks)
+            merged.notes.update(run.notes)
+            merged.load_errors += [e for e in run.load_errors if e not in merged.load_errors]
+        todo = [j for j in jobs if j.id not in merged.checks]
+        if not todo:
+            return merged, set()
     g.res.grader_error = f"the sandbox failed {len(errors)} times; last: {errors[-1]}"
     g.res.notes.append(f"{GRADER_ERROR}: {g.res.grader_error}")
-    return None
+    return merged, {j.id for j in todo}
 
 
 def _judge(g: Grading, run: SandboxRun, plan: list[Planned]) -> None:

@@ -460,6 +460,7 @@ def main() -> int:
     # the probe: which statements load (a statement that kills the process is skipped from then on)
     n = len(job.statements)
     t_end = time.monotonic() + job.load_wall
+    hard_end = time.monotonic() + load_budget(job.load_wall)
     while True:
         pid, r = _fork(lambda w: _probe(job, w, rule))
         data, ended = _read_capped(r, t_end, 1 << 20)
@@ -486,7 +487,14 @@ def main() -> int:
         job.skip.append(current)
         why = "did not finish in time" if not ended else f"ended the process ({status})"
         send({"event": "load_error", "k": current, "error": f"loading this statement {why}; skipped"})
-        t_end = max(t_end, time.monotonic() + 5)
+        if time.monotonic() >= hard_end:  # the submission's own load time is spent: the rest is not run
+            for k in range(current + 1, n):
+                if k not in job.skip:
+                    job.skip.append(k)
+                    send({"event": "load_error", "k": k, "error": "not loaded: loading the statements before "
+                          f"it took longer than {load_budget(job.load_wall):g} s in all; skipped"})
+            break
+        t_end = min(max(t_end, time.monotonic() + 5), hard_end)
     send({"event": "ready", "skip": sorted(job.skip)})
     for check in job.checks:
         pid, r = _fork(lambda w, c=check: _work(job, c, w, rule, np))
@@ -499,6 +507,14 @@ def main() -> int:
         send({"event": "check", "id": check.id, "status": status}, [data] if status == "exit 0" else [])
     send({"event": "finished"})
     return 0
+
+
+def load_budget(load_wall: float) -> float:
+    """The longest the harness spends loading a submission (top-level code, default arguments)
+    before it answers "ready": ``load_wall`` for the first try, then 5 s per statement skipped,
+    never more than twice ``load_wall`` in all. The grader waits this long plus a margin, so
+    slow loading is charged to the submission (its statements skipped), never a grader retry."""
+    return 2 * float(load_wall)
 
 
 def _read_exact(fd: int, n: int) -> bytes:

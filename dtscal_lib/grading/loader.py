@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ast
 import json
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,6 +49,19 @@ ALLOWED_KIT_IMPORTS = ("dtscal_lib.duckietown", "dtscal_lib.errors")
 MAX_CODE_CHARS = 256 * 1024
 #: a notebook file (outputs, images included): the largest solution notebook is 0.59 MB
 MAX_NOTEBOOK_BYTES = 32 * 2 ** 20
+
+
+#: one ``ast.parse`` at a time in this process: CPython's parser is not safe to call from two
+#: threads at once (python/cpython#106905, "AST constructor recursion depth mismatch": 44 of
+#: 1,240 concurrent loads raised SystemError under ``--jobs 2``, and two correct submissions got
+#: 0 "could not be read"). Parsing a submission takes milliseconds; grading it takes seconds.
+_PARSE_LOCK = threading.Lock()
+
+
+def parse(src: str) -> ast.Module:
+    """``ast.parse(src)``, never concurrently with another parse of the grader (:data:`_PARSE_LOCK`)."""
+    with _PARSE_LOCK:
+        return ast.parse(src)
 
 
 @dataclass
@@ -166,7 +180,7 @@ def load_submission(path) -> Submission:
         sub.cells = [(k + 1, first, first + src.count("\n")) for k, (src, first) in enumerate(blocks)]
     for src, first in blocks:
         try:
-            tree = ast.parse(src)
+            tree = parse(src)
         except SyntaxError as exc:
             sub.syntax_errors.append(f"{sub.where(first + (exc.lineno or 1) - 1)}: {exc.msg}")
             continue
@@ -279,7 +293,7 @@ def useful_import(src: str) -> str | None:
     """An import statement without its course plumbing (plots, widgets, the kit's checks):
     the statement itself, a narrower one, or None when nothing useful is left."""
     try:
-        node = ast.parse(src).body[0]
+        node = parse(src).body[0]
     except (SyntaxError, IndexError):
         return src
     if isinstance(node, ast.Import):

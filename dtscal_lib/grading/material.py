@@ -106,11 +106,6 @@ class Material:
             raise MaterialError(f"grading/tolerances.json is not readable: {exc}") from exc
         return cls(root, float(ns.get("POINTS_PER_FUNCTION", 10)), specs, tolerances=tolerances)
 
-    @property
-    def blocked_paths(self) -> list[Path]:
-        """What a submission may not read: the hidden cases and the solutions."""
-        return [self.root / "grading", self.root / "solutions"]
-
     def checks(self, assignment: str) -> dict[str, list[Built]]:
         """Built checks of every function of ``assignment`` (references computed once)."""
         if assignment not in self._built:

@@ -50,9 +50,17 @@ def text(res: GradeResult) -> str:
 
 def gradescope(results: list[GradeResult], notes: list[str] = ()) -> dict:
     """Gradescope's ``results.json`` for one student (one or several notebooks), with the
-    notes on the student's files that were not graded (and why)."""
+    notes on the student's files that were not graded (and why).
+
+    Gradescope's format (gradescope-autograders.readthedocs.io, "Autograder Specifications"):
+    a top-level ``score`` is "optional, but required if not on each test case". A check the
+    grader could not run carries no ``score`` (nor ``max_score``: ``extra_data`` keeps it), and
+    then the run carries none either: it is no grade at all, and ``extra_data.autograder_failed``
+    marks it. The bundle's ``run_autograder`` then withholds ``results.json``, which Gradescope
+    shows as "The autograder failed to execute correctly" (its "Troubleshooting" page), never 0."""
     tests, out = [], list(notes)
-    if any(r.grader_error for r in results):
+    failed = any(r.grader_error for r in results)
+    if failed:
         out.insert(0, f"{GRADER_ERROR}: the grader itself failed on part of this submission (not your code); "
                       "those checks are not graded yet and will be graded when the instructor reruns them")
     if not results:
@@ -67,13 +75,13 @@ def gradescope(results: list[GradeResult], notes: list[str] = ()) -> dict:
                 d["name"] = f"{res.assignment} / {d['name']}" if len(results) > 1 else d["name"]
                 extra = f.diagnosis if f.diagnosis and t.score < t.max_score else ""
                 d["output"] = "\n".join(x for x in (extra, d["output"]) if x)
-                if f.status == GRADER_ERROR_STATUS:  # not a 0 of the student's: a status of its own
-                    d["status"] = "failed"
-                    d["extra_data"] = {"status": GRADER_ERROR_STATUS}
+                if f.status == GRADER_ERROR_STATUS:  # not a 0 of the student's: no score at all
+                    del d["score"]
+                    d["extra_data"] = {"status": GRADER_ERROR_STATUS, "max_score": d.pop("max_score")}
                 tests.append(d)
     return {
-        **({"extra_data": {"status": GRADER_ERROR_STATUS}} if any(r.grader_error for r in results) else {}),
-        "score": round(sum(r.score for r in results), 2),
+        **({"extra_data": {"status": GRADER_ERROR_STATUS, "autograder_failed": True}} if failed else
+           {"score": round(sum(r.score for r in results), 2)}),
         "execution_time": round(sum(r.execution_time for r in results), 2),
         "output": "\n".join(out) if out else f"graded {len(results)} notebook(s) with dtscal grade",
         "tests": tests,

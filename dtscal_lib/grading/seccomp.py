@@ -40,7 +40,7 @@ import struct
 #: x86-64 system-call numbers (arch/x86/entry/syscalls/syscall_64.tbl, Linux 6.x)
 SYSCALLS = {
     "socket": 41, "connect": 42, "accept": 43, "sendto": 44, "bind": 49, "listen": 50, "socketpair": 53,
-    "clone": 56, "fork": 57, "vfork": 58, "execve": 59, "kill": 62, "ptrace": 101, "syslog": 103,
+    "ioctl": 16, "clone": 56, "fork": 57, "vfork": 58, "execve": 59, "kill": 62, "fcntl": 72, "ptrace": 101, "syslog": 103,
     "rt_sigqueueinfo": 129, "uselib": 134, "personality": 135, "mknod": 133, "modify_ldt": 154,
     "pivot_root": 155, "chroot": 161, "acct": 163, "settimeofday": 164, "mount": 165, "umount2": 166,
     "swapon": 167, "swapoff": 168, "reboot": 169, "iopl": 172, "ioperm": 173, "init_module": 175,
@@ -68,13 +68,22 @@ SANDBOX_DENY = (
     "fsconfig", "fsmount", "fspick", "mount_setattr", "socket", "socketpair", "connect", "bind", "listen",
     "accept", "accept4", "pidfd_getfd",
 )
+#: ``fcntl`` commands that name a process to signal later (fs/fcntl.c; include/uapi/linux/fcntl.h,
+#: asm-generic/fcntl.h): F_SETOWN 8, F_SETSIG 10, F_SETOWN_EX 15. With them and ``O_ASYNC``, one
+#: byte written to a pipe made the kernel send SIGKILL to the sandbox's parent (issue 28)
+FCNTL_DENY = (8, 10, 15)
+#: ``ioctl`` requests of the same kind, and the terminal's (include/uapi/asm-generic/ioctls.h,
+#: sockios.h): FIOSETOWN 0x8901, SIOCSPGRP 0x8902 (the owner of SIGIO/SIGURG), TIOCSPGRP 0x5410
+#: (a terminal's foreground group: SIGTTIN/SIGTTOU to others), TIOCSCTTY 0x540E, TIOCSTI 0x5412
+#: (typing into a terminal of the grader's user, in a sandbox without bubblewrap), TIOCLINUX 0x541C
+IOCTL_DENY = (0x8901, 0x8902, 0x5410, 0x540E, 0x5412, 0x541C)
 #: refused once the harness runs (filter 2)
 EXEC_DENY = ("execve", "execveat")
 #: clone flags that make new namespaces (CLONE_NEWNS, NEWCGROUP, NEWUTS, NEWIPC, NEWUSER, NEWPID, NEWNET, NEWTIME)
 CLONE_NEW_FLAGS = 0x00020000 | 0x02000000 | 0x04000000 | 0x08000000 | 0x10000000 | 0x20000000 | 0x40000000 | 0x80
 
 RET_ALLOW, RET_KILL_PROCESS, RET_ERRNO = 0x7FFF0000, 0x80000000, 0x00050000
-LD_W_ABS, JEQ_K, JGE_K, JSET_K, RET_K = 0x20, 0x15, 0x35, 0x45, 0x06
+LD_W_ABS, JA, JEQ_K, JGE_K, JSET_K, RET_K = 0x20, 0x05, 0x15, 0x35, 0x45, 0x06
 OFF_NR, OFF_ARCH = 0, 4
 
 
@@ -133,12 +142,26 @@ def _deny_if_flags(p: _Prog, name: str, arg: int, mask: int) -> None:
     p.add(LD_W_ABS, OFF_NR)
 
 
+def _deny_if_arg(p: _Prog, name: str, arg: int, refused: tuple[int, ...]) -> None:
+    """``name`` refused when argument ``arg`` (low 32 bits) is one of ``refused``."""
+    n = len(refused)
+    p.add(JEQ_K, SYSCALLS[name], jt=0, jf=n + 3)
+    p.add(LD_W_ABS, _arg(arg))
+    for i, v in enumerate(refused):
+        p.add(JEQ_K, v & 0xFFFFFFFF, jt=n - i, jf=0)  # to the refusal below
+    p.add(JA, 1)  # none matched: over the refusal
+    p.add(RET_K, RET_ERRNO | errno.EPERM)
+    p.add(LD_W_ABS, OFF_NR)
+
+
 def sandbox_filter() -> bytes:
     """Filter 1, for ``bwrap --seccomp``: the sandbox's whole lifetime."""
     p = _Prog()
     _head(p)
     for name in SANDBOX_DENY:
         _deny(p, name)
+    _deny_if_arg(p, "fcntl", 1, FCNTL_DENY)
+    _deny_if_arg(p, "ioctl", 1, IOCTL_DENY)
     _deny(p, "clone3", errno.ENOSYS)
     _deny_if_flags(p, "clone", 0, CLONE_NEW_FLAGS)
     p.add(RET_K, RET_ALLOW)
