@@ -1,0 +1,374 @@
+"""The rules of the exercises: one table per notebook, read by the notebook, the self-check and the grader.
+
+Per notebook (:data:`NOTEBOOKS`):
+
+- **imports** (:data:`ALLOWED_MODULES`): what an exercise function may use. NumPy, ``math`` and the rest of
+  Python's standard library, plus the kit's facts (:data:`KIT_ALLOWED`). **SciPy is refused in every
+  notebook**: each exercise needs only ``numpy.linalg`` (SVD, eigh, norm, solve, cholesky, det: the spectral
+  norm is ``np.linalg.norm(H, 2)``, the polar decomposition is ``U @ Vt`` of an SVD), and the grader's
+  sandbox holds exactly what this table lists (issue 28, item 1), so every module allowed here is another
+  library and its shared objects inside the sandbox. OpenCV is refused inside exercise functions (importing
+  it at the top of the notebook, for plots, is fine); its routines that compute an exercise
+  (:data:`CV2_DENY`) are an academic-honesty finding, charged to the function whose own code (or a helper
+  of its own that is not another exercise) makes the call, once.
+- **returns** (:data:`RETURNS`): numpy arrays, float64 (the rectification maps: float32); a function with two
+  outputs returns a tuple of two arrays. A list (nested or not) is *converted* for the values (the points of
+  the value checks count) and *refused* by the one return-type rule, with :func:`return_type_problem`'s words.
+- **precision**: compute in float64. float32 arithmetic inside fails the value checks of every function but
+  ``rectification_maps`` (whose maps are float32 by contract and judged to 0.01 px), in the self-check and
+  the grader alike; the hint "float32" is given only at float32's scale (:func:`float32_scale`).
+
+The self-check (``dtscal_lib.teaching.selfcheck``) and the grader (``dtscal_lib.grading``) both import this
+module and neither imports the other; the sandbox manifest reads :data:`ALLOWED_MODULES`.
+"""
+
+from __future__ import annotations
+
+import ast
+import inspect
+import sys
+import textwrap
+import types
+from dataclasses import dataclass
+
+import numpy as np
+
+#: OpenCV routines that solve an exercise (or most of one)
+CV2_DENY = frozenset({
+    "findHomography", "getPerspectiveTransform", "perspectiveTransform", "warpPerspective",
+    "calibrateCamera", "calibrateCameraExtended", "calibrateCameraRO", "initCameraMatrix2D", "projectPoints",
+    "undistortPoints", "undistortPointsIter", "undistortImagePoints", "initUndistortRectifyMap", "undistort",
+    "getOptimalNewCameraMatrix", "solvePnP", "solvePnPGeneric", "solvePnPRansac", "decomposeHomographyMat",
+    "convertPointsFromHomogeneous", "convertPointsToHomogeneous", "fisheye",
+})
+#: the kit's library ships with the course and holds exercise computations; an exercise function may use
+#: none of it but these facts and errors
+KIT_ALLOWED = ("dtscal_lib.duckietown", "dtscal_lib.errors")
+
+#: what every exercise notebook allows inside an exercise function (top-level module names; the standard
+#: library is allowed as a whole, see :func:`module_allowed`)
+ALLOWED_MODULES_COMMON = ("numpy", "math")
+
+
+@dataclass(frozen=True)
+class Returns:
+    """What a function returns: ``outputs`` arrays of ``dtype`` (a tuple when there are two)."""
+
+    outputs: int = 1
+    dtype: str = "float64"
+    shape: str = "(N, 2)"
+
+
+@dataclass(frozen=True)
+class NotebookRules:
+    """The rule table of one exercise notebook."""
+
+    functions: tuple[str, ...]
+    #: top-level modules an exercise function may import (with Python's standard library)
+    modules: tuple[str, ...] = ALLOWED_MODULES_COMMON
+    #: per function: the OpenCV routines that compute it (named in the notebook's text)
+    shortcuts: tuple[tuple[str, tuple[str, ...]], ...] = ()
+
+
+NOTEBOOKS: dict[str, NotebookRules] = {
+    "01_pinhole_projection": NotebookRules(
+        ("project_points",), shortcuts=(("project_points", ("projectPoints",)),)),
+    "02_homography": NotebookRules(
+        ("apply_homography", "estimate_homography"),
+        shortcuts=(("apply_homography", ("perspectiveTransform", "convertPointsFromHomogeneous")),
+                   ("estimate_homography", ("findHomography", "getPerspectiveTransform")))),
+    "03_intrinsic_calibration": NotebookRules(
+        ("intrinsic_constraints", "intrinsics_from_homographies", "extrinsics_from_homography"),
+        shortcuts=(("intrinsics_from_homographies", ("calibrateCamera", "initCameraMatrix2D")),
+                   ("extrinsics_from_homography", ("decomposeHomographyMat", "solvePnP")))),
+    "04_distortion_rectification": NotebookRules(
+        ("distort_normalized", "undistort_normalized", "rectification_maps"),
+        shortcuts=(("distort_normalized", ("projectPoints",)),
+                   ("undistort_normalized", ("undistortPoints", "undistortImagePoints")),
+                   ("rectification_maps", ("initUndistortRectifyMap", "undistort")))),
+    "05_extrinsic_calibration": NotebookRules(
+        ("board_ground_points", "pixel_to_ground", "camera_height_pitch"),
+        shortcuts=(("pixel_to_ground", ("perspectiveTransform",)),
+                   ("camera_height_pitch", ("decomposeHomographyMat", "solvePnP")))),
+}
+
+#: per notebook, the modules an exercise function may import (the grading sandbox's manifest reads this)
+ALLOWED_MODULES: dict[str, tuple[str, ...]] = {nb: r.modules for nb, r in NOTEBOOKS.items()}
+
+RETURNS: dict[str, Returns] = {
+    "project_points": Returns(),
+    "apply_homography": Returns(),
+    "estimate_homography": Returns(shape="(3, 3)"),
+    "intrinsic_constraints": Returns(shape="(2, 6)"),
+    "intrinsics_from_homographies": Returns(shape="(3, 3)"),
+    "extrinsics_from_homography": Returns(2, shape="(R (3, 3), t (3,))"),
+    "distort_normalized": Returns(),
+    "undistort_normalized": Returns(),
+    "rectification_maps": Returns(2, "float32", "(map_x, map_y), each (height, width)"),
+    "board_ground_points": Returns(),
+    "pixel_to_ground": Returns(),
+    "camera_height_pitch": Returns(shape="(2,)"),
+}
+
+#: the exercise functions that another exercise function of its notebook may call, and that the grader can
+#: replace by a stand-in of its own (one bug, one charge: ``dtscal_lib.grading.substitutes``)
+STAND_IN_CALLEES = ("apply_homography", "intrinsic_constraints", "distort_normalized", "board_ground_points")
+
+
+def notebook_of(func: str) -> str:
+    return next(nb for nb, r in NOTEBOOKS.items() if func in r.functions)
+
+
+def module_allowed(top: str, notebook: str) -> bool:
+    """May an exercise function of ``notebook`` use the top-level module ``top``?"""
+    if top in NOTEBOOKS[notebook].modules:
+        return True
+    if top in ("cv2", "cv", "dtscal_lib"):  # judged by name: the honesty rule, the kit's allow-list
+        return False
+    return top in sys.stdlib_module_names
+
+
+def allowed_words(notebook: str) -> str:
+    mods = NOTEBOOKS[notebook].modules
+    return ", ".join(("NumPy" if m == "numpy" else m) for m in mods) + " and Python's standard library"
+
+
+# --------------------------------------------------------------------------- the words (one source)
+def honesty_reason(func: str, names) -> str:
+    """Why ``func`` gets no credit for calling a solving routine (the self-check and the grader say this)."""
+    return (f"no credit: {func} calls {', '.join(names)}, which does the exercise for you "
+            "(academic honesty). Write the computation yourself (calling it from tests or plots is fine).")
+
+
+def module_reason(func: str, names, notebook: str) -> str:
+    """Why ``func`` gets no credit for using a module the notebook does not allow."""
+    return (f"not allowed: {func} uses {', '.join(names)}; exercise functions of this notebook may use "
+            f"{allowed_words(notebook)} only (the grader holds nothing else). SciPy is not needed: "
+            "numpy.linalg has svd, eigh, norm (ord=2 is the spectral norm), solve and cholesky.")
+
+
+def return_type_problem(func: str, value) -> str:
+    """The one return-type rule: "" when ``value`` is what ``func`` must return, else what is wrong."""
+    r = RETURNS[func]
+    parts = list(value) if r.outputs > 1 and isinstance(value, tuple) and len(value) == r.outputs else [value]
+    if r.outputs > 1 and len(parts) != r.outputs:
+        return (f"should return a tuple of {r.outputs} numpy arrays {r.shape}, got "
+                f"{_kind(value)}: return ({', '.join(['...'] * r.outputs)}) with numpy arrays")
+    for p in parts:
+        if type(p) is not np.ndarray:
+            return (f"should return numpy array(s) of {r.dtype} {r.shape}, got {_kind(p)}: wrap the result in "
+                    f"np.array(..., dtype=np.{r.dtype}) (a list or a number is not an array)")
+        if str(p.dtype) != r.dtype:
+            return f"should return dtype {r.dtype} {r.shape}, got {p.dtype}"
+    return ""
+
+
+def _kind(v) -> str:
+    if isinstance(v, np.ndarray):
+        return f"an ndarray subclass ({type(v).__name__})" if type(v) is not np.ndarray else f"an array {v.shape}"
+    if isinstance(v, (list, tuple)):
+        nested = any(isinstance(x, (list, tuple)) for x in v)
+        return f"a {'nested ' if nested else ''}{type(v).__name__} of {len(v)}"
+    return f"a {type(v).__name__}"
+
+
+def float32_scale(got, want) -> bool:
+    """Is the difference between ``got`` and ``want`` what float32 arithmetic leaves (relative error between
+    float64's and a few hundred of float32's epsilon), and not a real mistake?"""
+    g, w = np.asarray(got, float), np.asarray(want, float)
+    if g.shape != w.shape or not np.all(np.isfinite(g)):
+        return False
+    scale = float(np.abs(w).max(initial=0.0)) or 1.0
+    err = float(np.abs(g - w).max(initial=0.0)) / scale
+    eps32 = float(np.finfo(np.float32).eps)  # 1.19e-7
+    return 1e3 * float(np.finfo(np.float64).eps) < err <= 300 * eps32
+
+
+# --------------------------------------------------------------------------- reading code (no code runs)
+def _record_aliases(node, aliases: dict) -> None:
+    if isinstance(node, ast.Import):
+        for a in node.names:
+            if a.asname:
+                aliases[a.asname] = a.name
+            else:
+                aliases[a.name.split(".")[0]] = a.name.split(".")[0]
+    else:
+        mod = node.module or ""
+        for a in node.names:
+            aliases[a.asname or a.name] = f"{mod}.{a.name}" if mod else a.name
+
+
+def _dotted(node, aliases: dict, strict: bool = False) -> str | None:
+    """``cv2.findHomography`` for ``c.findHomography`` when ``import cv2 as c``; None if not a name chain
+    (``strict``: nor a chain from an imported name)."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "__import__" \
+            and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str):
+        base = node.args[0].value
+    elif isinstance(node, ast.Name):
+        if strict and node.id not in aliases:
+            return None
+        base = aliases.get(node.id, node.id)
+    else:
+        return None
+    return ".".join([base, *reversed(parts)])
+
+
+def denied(name: str | None) -> bool:
+    """Is ``name`` (a dotted origin) a routine solving an exercise?"""
+    if not name:
+        return False
+    parts = name.split(".")
+    if parts[0] in ("cv2", "cv"):
+        return len(parts) > 1 and parts[1] in CV2_DENY
+    if parts[0] == "dtscal_lib" and len(parts) > 1:
+        return not any(name == m or name.startswith(m + ".") for m in KIT_ALLOWED)
+    return False
+
+
+def _most_specific(hits: set) -> list[str]:
+    return sorted(h for h in hits if not any(o != h and o.startswith(h + ".") for o in hits))
+
+
+def _scan(fn: ast.AST, aliases: dict, notebook: str | None) -> tuple[list[str], list[str]]:
+    """(solving routines, modules the notebook does not allow) that ``fn`` names."""
+    local = dict(aliases)
+    for node in ast.walk(fn):  # imports inside the function count too
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            _record_aliases(node, local)
+            if notebook is not None:
+                for a in node.names:
+                    mod = a.name if isinstance(node, ast.Import) else f"{node.module or ''}.{a.name}"
+                    local.setdefault(f"<import {mod}>", mod)
+    hits, modules = set(), set()
+    for node in ast.walk(fn):
+        if isinstance(node, (ast.Attribute, ast.Name)):
+            name = _dotted(node, local)
+            if name and denied(name) and name.count(".") >= 1:
+                hits.add(name)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "getattr" \
+                and len(node.args) >= 2 and isinstance(node.args[1], ast.Constant) \
+                and isinstance(node.args[1].value, str):
+            base = _dotted(node.args[0], local)
+            if base and denied(f"{base}.{node.args[1].value}"):
+                hits.add(f"{base}.{node.args[1].value}")
+        if notebook is not None and isinstance(node, (ast.Attribute, ast.Name)):
+            strict = _dotted(node, local, strict=True)
+            if strict and not module_allowed(strict.split(".")[0], notebook):
+                modules.add(strict)
+    if notebook is not None:
+        modules |= {m for k, m in local.items() if k.startswith("<import ")
+                    and not module_allowed(m.split(".")[0], notebook)}
+    modules = {m for m in modules if not denied(m) and not any(h.startswith(m + ".") or h == m for h in hits)
+               and not any(m == k or m.startswith(k + ".") for k in KIT_ALLOWED) and m != "dtscal_lib"}
+    return _most_specific(hits), _most_specific(modules)
+
+
+def forbidden_calls(fn: ast.AST, aliases: dict) -> list[str]:
+    """Names of solving routines that ``fn`` uses (calls, or takes via getattr), sorted."""
+    return _scan(fn, aliases, None)[0]
+
+
+def _called_names(fn: ast.AST) -> set[str]:
+    return {n.id for n in ast.walk(fn) if isinstance(n, ast.Name)}
+
+
+@dataclass
+class Charges:
+    """Per function: the solving routines and the disallowed modules its code reaches."""
+
+    honesty: dict[str, list[str]]
+    modules: dict[str, list[str]]
+
+
+def charges(functions: dict[str, ast.AST], aliases: dict, notebook: str | None = None,
+            exercises: tuple[str, ...] = ()) -> Charges:
+    """What each function of a submission is charged with: the routines it reaches through its own code and
+    its own helpers at any depth (``"cv2.x (through helper)"``), never through another exercise function
+    that the grader replaces by a stand-in (that function is charged itself: one call, one charge)."""
+    scans = {name: _scan(fn, aliases, notebook) for name, fn in functions.items()}
+    out = Charges({}, {})
+    for name in functions:
+        hits, mods = set(scans[name][0]), set(scans[name][1])
+        seen, todo = {name}, [name]
+        while todo:
+            for callee in _called_names(functions[todo.pop()]):
+                if callee in functions and callee not in seen and not (callee in exercises and callee != name
+                                                                        and callee in STAND_IN_CALLEES):
+                    seen.add(callee)
+                    todo.append(callee)
+                    hits.update(f"{h} (through {callee})" for h in scans[callee][0])
+                    mods.update(f"{h} (through {callee})" for h in scans[callee][1])
+        if hits:
+            out.honesty[name] = sorted(hits)
+        if mods:
+            out.modules[name] = sorted(mods)
+    return out
+
+
+# --------------------------------------------------------------------------- a live function (the self-check)
+def _origin(value) -> str | None:
+    """The dotted origin of a notebook global: a module's name, or a function's ``module.name``."""
+    if isinstance(value, types.ModuleType):
+        return value.__name__
+    mod = getattr(value, "__module__", None)
+    name = getattr(value, "__name__", None)
+    if isinstance(mod, str) and isinstance(name, str) and mod != "__main__" and not mod.startswith("dtscal_"):
+        mod = "cv2" if mod.startswith("cv2") else mod
+        return f"{mod}.{name}"
+    if isinstance(mod, str) and mod.startswith("dtscal_lib") and isinstance(name, str):
+        return f"{mod}.{name}"
+    return None
+
+
+def _source_tree(fn) -> ast.AST | None:
+    try:
+        src = textwrap.dedent(inspect.getsource(fn))
+        return ast.parse(src).body[0]
+    except (OSError, TypeError, SyntaxError, IndexError):
+        return None
+
+
+def live_charges(func: str, fn) -> tuple[str, str]:
+    """(honesty reason, module reason) for a live exercise function (the self-check's view of the grader's
+    rule): the function's source and its notebook helpers' are read, its globals name the imports."""
+    glb = getattr(fn, "__globals__", None)
+    tree = _source_tree(fn)
+    if glb is None or tree is None:
+        return "", ""
+    notebook = notebook_of(func)
+    aliases = {k: o for k, v in list(glb.items()) if not k.startswith("__") and (o := _origin(v))}
+    functions = {func: tree}
+    todo = [tree]
+    while todo:  # the notebook's own functions it calls (helpers and other exercise functions)
+        for name in sorted(_called_names(todo.pop())):
+            f = glb.get(name)
+            if name not in functions and isinstance(f, types.FunctionType) and f.__globals__ is glb:
+                sub = _source_tree(f)
+                if sub is not None:
+                    functions[name] = sub
+                    todo.append(sub)
+    found = charges(functions, aliases, notebook, NOTEBOOKS[notebook].functions)
+    hon = found.honesty.get(func)
+    mods = found.modules.get(func)
+    return (honesty_reason(func, hon) if hon else "", module_reason(func, mods, notebook) if mods else "")
+
+
+def rules_markdown(notebook: str) -> str:
+    """The notebook's rule cell, generated from its table (a test compares the notebook's text with it)."""
+    r = NOTEBOOKS[notebook]
+    lines = ["### Rules of this notebook's exercises", "",
+             f"- **Imports**: inside an exercise function use {allowed_words(notebook)} only: no SciPy, no OpenCV "
+             "(`import cv2` at the top is for the plots). The self-check and the grader refuse anything else.",
+             "- **Returns**: numpy arrays; " + "; ".join(
+                 f"`{f}`: {RETURNS[f].shape} {RETURNS[f].dtype}" for f in r.functions)
+             + ". A list is refused by the return-type check (its values still count).",
+             "- **Precision**: compute in float64; float32 arithmetic inside fails the checks.",
+             ]
+    for f, cv in r.shortcuts:
+        lines.append(f"- **Forbidden**: `{f}` may not call " + ", ".join(f"`cv2.{c}`" for c in cv)
+                     + " (it computes the exercise): no credit for the function that calls it.")
+    return "\n".join(lines)
