@@ -24,6 +24,7 @@ from ..boards import DUCKIETOWN_BOARD
 from ..camera import intrinsic_matrix, new_camera_matrix
 from ..camera import undistort_normalized as newton
 from ..errors import DtscalError
+from ..mistakes import robot_ground_homography
 from ..poses import board_homography, points_on_rays, random_board_pose
 from .metrics import K_max_px, apply_homography, pose_errors, shape_key, truth_rms_px
 from .sandbox import Call, CheckRun
@@ -165,8 +166,6 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             truth.append(np.column_stack([x0 + (k // cols) * sq, y0 + (k % cols) * sq]))
         return [tuple(b) for b in boards], truth
     if func == "camera_height_pitch":  # robot cameras placed by hand: the height and pitch are the truth
-        from ..teaching.selfcheck.diagnosis import robot_ground_homography
-
         K = dt.default_P()[:, :3] if p.get("camera", "rectified") == "rectified" else CAMERAS[p["camera"]]
         args, truth = [], []
         for _ in range(views):

@@ -7,7 +7,7 @@
 2. ``screen``: functions missing, still stubs, or calling a solving routine get 0 with the reason;
 3. ``run_own``: the other functions' checks and diagnosis probes run in the sandbox
    (:mod:`.sandbox`, one :class:`~.jobs.Job` per check), and are judged against the references
-   computed here (:mod:`.checks`); the mistake is named (:mod:`dtscal_lib.teaching.selfcheck.diagnosis`);
+   computed here (:mod:`.checks`); the mistake is named (:mod:`dtscal_lib.mistakes`, the catalogue both wings import);
 4. ``run_stand_ins``: one bug, one charge — a function whose callee lost points runs again with the
    grader's stand-in for that callee;
 5. ``score``: the better of the two runs per check; checks of form count only once a value is right;
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from ..teaching.selfcheck import diagnosis
+from .. import mistakes as diagnosis
 from ..exercise_rules import charges, honesty_reason, module_reason
 from . import substitutes
 from .checks import Built

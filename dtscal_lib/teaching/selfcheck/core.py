@@ -12,6 +12,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ...mistakes import FUNCTIONS, diagnose_function
+
 PASS, FAIL, NOT_IMPLEMENTED = "pass", "fail", "not implemented yet"
 
 
@@ -95,8 +97,6 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
         else:
             report.results.append(CaseResult(case.title, PASS))
     if report.status == FAIL:
-        from .diagnosis import FUNCTIONS, diagnose_function
-
         if name in FUNCTIONS:
             mistake = diagnose_function(name, fn)
             report.diagnosis = mistake.line() if mistake else ""

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from ... import duckietown as dt
+from ...mistakes import robot_ground_homography  # a camera placed by hand: the truth by construction
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, nums, run_check
 
 __all__ = ["check_board_ground_points", "check_pixel_to_ground", "check_camera_height_pitch"]
@@ -106,8 +107,6 @@ def check_pixel_to_ground(fn: Callable) -> Report:
 # --------------------------------------------------------------------------- camera_height_pitch
 def _case_robot(height, pitch, yaw, x, scale, title, hint) -> Case:
     def run(fn):
-        from .diagnosis import robot_ground_homography  # a camera placed by hand: the truth by construction
-
         K = dt.default_P()[:, :3]
         H = robot_ground_homography(K, height, pitch, yaw_deg=yaw, x=x) * scale
         got = expect_shape(fn(H.copy(), K.copy()), (2,), "camera_height_pitch(H, K)")

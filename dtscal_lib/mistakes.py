@@ -1,4 +1,7 @@
-"""Name the mistake: how a wrong answer differs from the right one.
+"""The mistake catalogue (probes, mistakes, equations): how a wrong answer differs from the right one.
+
+Both wings import it: the self-checks (``dtscal_lib.teaching.selfcheck``) and the grader
+(``dtscal_lib.grading``); it imports neither.
 
 A student's function is run on a few public *probe* inputs. Its answers are compared with
 the answers of *mistake models*: small, deliberately wrong versions of each exercise
@@ -27,14 +30,12 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from ... import duckietown as dt
-from ...boards import Board, ground_points
-from ...camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
-from ...camera import undistort_normalized as _newton_undistort
-from ...homography import apply_homography
-from ...poses import board_homography, random_board_pose
-from .homography import raw_dlt as _raw_dlt  # the mistake model for "no normalization"
-from .projection import K_SKEWED
+from . import duckietown as dt
+from .boards import Board, ground_points
+from .camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
+from .camera import undistort_normalized as _newton_undistort
+from .homography import apply_homography
+from .poses import board_homography, random_board_pose
 
 __all__ = ["Mistake", "diagnose", "diagnose_function", "probe_args", "MISTAKES", "FUNCTIONS"]
 
@@ -53,8 +54,19 @@ class Mistake:
 
 
 # --------------------------------------------------------------------------- probe inputs
-#: the camera of the probes: the self-checks' skewed camera
-K_PROBE = K_SKEWED
+#: the camera of the probes: the self-checks' skewed camera (``selfcheck.projection.K_SKEWED``)
+K_PROBE = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=6.0)
+
+
+def raw_dlt(src, dst) -> np.ndarray:
+    """The DLT without normalization (the mistake model for "no normalization"; to recognise it, not to solve
+    the exercise)."""
+    rows = []
+    for (x, y), (u, v) in zip(src, dst):
+        rows.append([x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u])
+        rows.append([0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v])
+    h = np.linalg.svd(np.asarray(rows))[2][-1].reshape(3, 3)
+    return h / h[2, 2]
 
 
 def _pose(seed: int, distance: float = 0.6):
@@ -335,7 +347,7 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
         (_M("no_normalization", "no normalization: without Hartley's normalization the DLT's answer depends on "
             "where the origin is and what unit the points use, and it loses precision far from the origin; centre "
             "and scale both point sets first", EQ36),
-         lambda s, d: _raw_dlt(s, d)),
+         lambda s, d: raw_dlt(s, d)),
     ]),
     "intrinsic_constraints": (_constraints, [
         (_M("rows_not_columns", "v_ij built from the rows of H: h1 and h2 are the COLUMNS H[:, 0], H[:, 1]",
@@ -405,7 +417,7 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
     ]),
 }
 def _height_pitch(H, K) -> np.ndarray:
-    from ...ground import camera_pose_from_homography
+    from .ground import camera_pose_from_homography
 
     pose = camera_pose_from_homography(np.asarray(H, float), np.asarray(K, float))
     return np.array([pose["height_m"], pose["pitch_down_deg"]])
