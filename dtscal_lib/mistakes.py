@@ -32,6 +32,7 @@ import numpy as np
 
 from . import duckietown as dt
 from .boards import Board, ground_points
+from .exercise_rules import PRECISION_RTOL, float32_sized, relative_error
 from .camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
 from .camera import undistort_normalized as _newton_undistort
 from .homography import apply_homography
@@ -638,3 +639,50 @@ def diagnose_function(func: str, fn: Callable) -> Mistake | None:
         except Exception as exc:  # a raising probe gives no diagnosis
             outputs.append(exc)
     return diagnose(func, args_list, outputs)
+
+
+# --------------------------------------------------------------------------- the precision contract
+#: the probes of each function whose right answer is exact (the noisy ones determine no exact answer)
+_EXACT_PROBES = {"estimate_homography": (0,), "extrinsics_from_homography": (0,)}
+#: the maps are float32 by contract (judged to 0.01 px): no precision probe
+NO_PRECISION = ("rectification_maps",)
+
+
+def right_answers(func: str, args_list: list[tuple]) -> list:
+    """The exact answer of each probe (None for a noisy probe)."""
+    exact = _EXACT_PROBES.get(func, range(len(args_list)))
+    out = []
+    for i, args in enumerate(args_list):
+        if i not in exact:
+            out.append(None)
+        elif func == "extrinsics_from_homography":
+            out.append(_PROBE_POSE())
+        elif func == "intrinsics_from_homographies":
+            out.append(K_PROBE)
+        elif func == "estimate_homography":  # the probe's true H (an exact fit reproduces it)
+            H = _views(K_PROBE, 1, 903)[0][0]
+            out.append(H / H[2, 2])
+        elif func == "undistort_normalized":
+            out.append(_newton_undistort(np.asarray(args[0], float), args[1]))
+        else:
+            out.append(MISTAKES[func][0](*args))
+    return out
+
+
+def precision_problem(func: str, args_list: list[tuple], outputs: list) -> str:
+    """The precision contract (float64 inside), judged the same way by the self-check and the grader: "" when
+    every exact probe's answer is within :data:`PRECISION_RTOL` of the right one, else what is wrong. A wrong
+    answer (not a float32-sized difference) is left to the value checks: "" too."""
+    if func in NO_PRECISION:
+        return ""
+    for out, want in zip(outputs, right_answers(func, args_list)):
+        if want is None or isinstance(out, BaseException):
+            continue
+        got, wants = _as_arrays(out), _as_arrays(want)
+        err = relative_error(got, wants) if got is not None and len(got) == len(wants) else None
+        if err is not None and float32_sized(err):
+            return (f"right to a relative {err:.1g} only, where float64 gives {PRECISION_RTOL:g} or better: "
+                    "float32 arithmetic (or a rounded constant, or a loose iteration tolerance) somewhere; "
+                    "compute in float64 throughout")
+    return ""
+
