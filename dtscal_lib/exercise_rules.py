@@ -147,29 +147,42 @@ def module_reason(func: str, names, notebook: str) -> str:
             "numpy.linalg has svd, eigh, norm (ord=2 is the spectral norm), solve and cholesky.")
 
 
-def return_type_problem(func: str, value) -> str:
-    """The one return-type rule: "" when ``value`` is what ``func`` must return, else what is wrong."""
+def answer_note(value) -> str:
+    """How the grader's sandbox describes a returned value that is not a plain array (its harness's ``_encode``
+    says the same): "" for an array, a number, a tuple of arrays; "a list", "a tuple", "an ndarray subclass (X)"..."""
+    if isinstance(value, (tuple, list)) and 1 <= len(value) <= 4 and \
+            any(isinstance(v, (np.ndarray, tuple)) for v in value):  # several outputs
+        if isinstance(value, list):
+            return "a list"
+        return next((f"{n} inside the tuple" for n in (answer_note(v) for v in value) if n), "")
+    if isinstance(value, np.ndarray):
+        return f"an ndarray subclass ({type(value).__name__})" if type(value) is not np.ndarray else ""
+    if isinstance(value, (float, int, np.floating, np.integer)) and not isinstance(value, bool) or value is None:
+        return ""
+    return f"a {type(value).__name__}"
+
+
+def return_type_problem(func: str, value, note: str | None = None) -> str:
+    """The one return-type rule: "" when ``value`` is what ``func`` must return, else what is wrong.
+
+    The self-check passes the raw value; the grader passes the value its sandbox decoded (arrays) and the
+    sandbox's ``note`` on it. Both get the same words."""
     r = RETURNS[func]
-    parts = list(value) if r.outputs > 1 and isinstance(value, tuple) and len(value) == r.outputs else [value]
-    if r.outputs > 1 and len(parts) != r.outputs:
-        return (f"should return a tuple of {r.outputs} numpy arrays {r.shape}, got "
-                f"{_kind(value)}: return ({', '.join(['...'] * r.outputs)}) with numpy arrays")
+    want = (f"a tuple of {r.outputs} numpy arrays {r.shape}, dtype {r.dtype}" if r.outputs > 1 else
+            f"a numpy array {r.shape} of dtype {r.dtype}")
+    note = answer_note(value) if note is None else note
+    if note:
+        return (f"should return {want}, got {note}: return numpy arrays (np.asarray(..., dtype=np.{r.dtype})); "
+                "a list's values are read, but the return type is part of the contract")
+    parts = list(value) if isinstance(value, tuple) else [value]
+    if len(parts) != r.outputs or not all(isinstance(p, np.ndarray) for p in parts):
+        got = (f"a tuple of {len(parts)}" if isinstance(value, tuple) else
+               f"a {type(value).__name__}" if not isinstance(value, np.ndarray) else "one array")
+        return f"should return {want}, got {got}"
     for p in parts:
-        if type(p) is not np.ndarray:
-            return (f"should return numpy array(s) of {r.dtype} {r.shape}, got {_kind(p)}: wrap the result in "
-                    f"np.array(..., dtype=np.{r.dtype}) (a list or a number is not an array)")
         if str(p.dtype) != r.dtype:
-            return f"should return dtype {r.dtype} {r.shape}, got {p.dtype}"
+            return f"should return {want}, got dtype {p.dtype}"
     return ""
-
-
-def _kind(v) -> str:
-    if isinstance(v, np.ndarray):
-        return f"an ndarray subclass ({type(v).__name__})" if type(v) is not np.ndarray else f"an array {v.shape}"
-    if isinstance(v, (list, tuple)):
-        nested = any(isinstance(x, (list, tuple)) for x in v)
-        return f"a {'nested ' if nested else ''}{type(v).__name__} of {len(v)}"
-    return f"a {type(v).__name__}"
 
 
 #: the precision contract: the relative error (to the answer's largest entry) a float64 computation stays within
@@ -301,11 +314,12 @@ class Charges:
 
 
 def charges(functions: dict[str, ast.AST], aliases: dict, notebook: str | None = None,
-            exercises: tuple[str, ...] = ()) -> Charges:
+            exercises: tuple[str, ...] = (), own_aliases: dict[str, dict] | None = None) -> Charges:
     """What each function of a submission is charged with: the routines it reaches through its own code and
     its own helpers at any depth (``"cv2.x (through helper)"``), never through another exercise function
     that the grader replaces by a stand-in (that function is charged itself: one call, one charge)."""
-    scans = {name: _scan(fn, aliases, notebook) for name, fn in functions.items()}
+    own_aliases = own_aliases or {}
+    scans = {name: _scan(fn, own_aliases.get(name, aliases), notebook) for name, fn in functions.items()}
     out = Charges({}, {})
     for name in functions:
         hits, mods = set(scans[name][0]), set(scans[name][1])
@@ -332,7 +346,7 @@ def _origin(value) -> str | None:
         return value.__name__
     mod = getattr(value, "__module__", None)
     name = getattr(value, "__name__", None)
-    if isinstance(mod, str) and isinstance(name, str) and mod != "__main__" and not mod.startswith("dtscal_"):
+    if isinstance(mod, str) and isinstance(name, str) and not mod.startswith("dtscal_"):
         mod = "cv2" if mod.startswith("cv2") else mod
         return f"{mod}.{name}"
     if isinstance(mod, str) and mod.startswith("dtscal_lib") and isinstance(name, str):
@@ -341,11 +355,49 @@ def _origin(value) -> str | None:
 
 
 def _source_tree(fn) -> ast.AST | None:
+    """The syntax tree of ``fn`` alone (its ``def``, or its ``lambda`` among the statement's), or None."""
     try:
         src = textwrap.dedent(inspect.getsource(fn))
-        return ast.parse(src).body[0]
-    except (OSError, TypeError, SyntaxError, IndexError):
+    except (OSError, TypeError):
         return None
+    for text in (src, f"(\n{src}\n)"):  # a lambda's lines may be a fragment of a longer expression
+        try:
+            tree = ast.parse(text)
+            break
+        except SyntaxError:
+            continue
+    else:
+        return None
+    code = getattr(fn, "__code__", None)
+    if fn.__name__ == "<lambda>" and code is not None:
+        names = list(code.co_varnames[:code.co_argcount])
+        found = [n for n in ast.walk(tree) if isinstance(n, ast.Lambda) and [a.arg for a in n.args.args] == names]
+    else:
+        found = [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
+                 and n.name == fn.__name__]
+    return found[0] if len(found) == 1 else None
+
+
+def _user_module(name) -> bool:
+    """Is the module called ``name`` the student's code (a notebook's ``__main__``, a script), not a library?"""
+    if not isinstance(name, str) or not name:
+        return False
+    top = name.split(".")[0]
+    if top in ("numpy", "cv2", "scipy", "dtscal_lib", "builtins") or top in sys.stdlib_module_names:
+        return False
+    path = str(getattr(sys.modules.get(name), "__file__", "") or "")
+    return not any(part in path for part in ("site-packages", "dist-packages"))
+
+
+def _user_code(f) -> bool:
+    """Is ``f`` the student's code (a notebook's or a script's function), not a library's?"""
+    return _user_module(getattr(f, "__module__", None))
+
+
+def _aliases_of(glb: dict) -> dict:
+    """A namespace's imports as dotted origins (``np`` -> ``numpy``); the student's own code is not an import."""
+    return {k: o for k, v in list(glb.items()) if not k.startswith("__")
+            and not (not isinstance(v, types.ModuleType) and _user_code(v)) and (o := _origin(v))}
 
 
 def live_charges(func: str, fn) -> tuple[str, str]:
@@ -356,18 +408,18 @@ def live_charges(func: str, fn) -> tuple[str, str]:
     if glb is None or tree is None:
         return "", ""
     notebook = notebook_of(func)
-    aliases = {k: o for k, v in list(glb.items()) if not k.startswith("__") and (o := _origin(v))}
-    functions = {func: tree}
-    todo = [tree]
-    while todo:  # the notebook's own functions it calls (helpers and other exercise functions)
-        for name in sorted(_called_names(todo.pop())):
-            f = glb.get(name)
-            if name not in functions and isinstance(f, types.FunctionType) and f.__globals__ is glb:
+    functions, names_of = {func: tree}, {func: _aliases_of(glb)}
+    todo = [(tree, glb)]
+    while todo:  # the student's own functions it calls (helpers and other exercise functions), at any depth
+        node, where = todo.pop()
+        for name in sorted(_called_names(node)):
+            f = where.get(name)
+            if name not in functions and isinstance(f, types.FunctionType) and _user_code(f):
                 sub = _source_tree(f)
                 if sub is not None:
-                    functions[name] = sub
-                    todo.append(sub)
-    found = charges(functions, aliases, notebook, NOTEBOOKS[notebook].functions)
+                    functions[name], names_of[name] = sub, _aliases_of(f.__globals__)
+                    todo.append((sub, f.__globals__))
+    found = charges(functions, {}, notebook, NOTEBOOKS[notebook].functions, names_of)
     hon = found.honesty.get(func)
     mods = found.modules.get(func)
     return (honesty_reason(func, hon) if hon else "", module_reason(func, mods, notebook) if mods else "")

@@ -17,6 +17,7 @@ from ..exercise_rules import NOTEBOOKS
 from .checks import Built, MaterialError, build_check
 from .loader import load_submission, useful_import
 from .metrics import load as load_tolerances
+from .specs import SpecError, typed
 
 #: the exercise notebooks and the functions each one grades
 ASSIGNMENTS: dict[str, tuple[str, ...]] = {nb: rules.functions for nb, rules in NOTEBOOKS.items()}
@@ -94,6 +95,11 @@ class Material:
             for f in funcs:
                 if not specs.get(f):
                     raise MaterialError(f"grading/cases.py has no checks for {f} ({a})")
+                for spec in specs[f] if isinstance(specs[f], list) else [specs[f]]:
+                    try:  # every check through its kind's dataclass: an unknown key is named here
+                        typed(f, spec)
+                    except SpecError as exc:
+                        raise MaterialError(str(exc)) from None
         try:
             tolerances = load_tolerances(root)
         except ValueError as exc:
