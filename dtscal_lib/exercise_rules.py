@@ -185,6 +185,15 @@ def return_type_problem(func: str, value, note: str | None = None) -> str:
     return ""
 
 
+def raises_problem(error: str) -> str:
+    """A raised error that is not the ValueError the contract asks for (the self-check and the grader say this):
+    "" for ``ValueError: <a message of the student's>``; a ValueError from ``math`` (a square root of a negative
+    number on too few views) is not one."""
+    if error.startswith("ValueError") and "math domain error" not in error:
+        return ""
+    return f"should raise ValueError saying what is wrong (check the number of views first), raised {error}"
+
+
 #: the precision contract: the relative error (to the answer's largest entry) a float64 computation stays within
 #: on the exact probes of the mistake catalogue. Measured (``tests/test_exercise_rules.py``): every solution and
 #: correct corpus formulation <= 4e-14 there; float32 arithmetic inside >= 1e-8 (its epsilon is 1.2e-7)

@@ -147,7 +147,9 @@ def _probes(func: str) -> tuple:
     if func == "camera_height_pitch":
         K = dt.default_P()[:, :3]
         return ((robot_ground_homography(K, 0.104, 18.0, yaw_deg=0.8) * 3.0, K),
-                (robot_ground_homography(K, 0.15, 31.0, yaw_deg=-2.0, x=0.03) * -0.5, K))
+                (robot_ground_homography(K, 0.15, 31.0, yaw_deg=-2.0, x=0.03) * -0.5, K),
+                # pitched UP (a negative pitch below the horizon): shows abs() on the pitch
+                (robot_ground_homography(K, 0.12, -9.0, yaw_deg=1.5, x=0.05) * 1.7, K))
     raise KeyError(func)
 
 
@@ -440,7 +442,57 @@ MISTAKES["camera_height_pitch"] = (_height_pitch, [
     (_M("height_from_t", "the height read from t: t is the robot's origin seen from the camera; the camera centre "
         "in the robot frame is C = -R^T t", EQ_GROUND),
      lambda H, K: _height_pitch_t(H, K)),
+    # the mistakes below are derived from the equations, one step of the pipeline each: M = K^-1 H^-1 =
+    # lambda [r1 r2 t], lambda = 1 / |M[:, 0]| (sign: a ground point ahead is in front of the camera),
+    # R = [r1 r2 r1 x r2] made orthonormal, C = -R^T t, height = C_z, pitch = asin(-R[2, 2]) in degrees
+    (_M("K_inverse_forgotten", "K^-1 forgotten: H^-1 = lambda K [r1 r2 t], so [r1 r2 t] = K^-1 H^-1 / lambda; "
+        "without K^-1 the columns are in pixels, not a rotation", EQ_GROUND),
+     lambda H, K: _hp(np.linalg.inv(np.asarray(H, float)))),
+    (_M("K_transposed", "K transposed: solve with K itself (M = K^-1 H^-1 = np.linalg.solve(K, H^-1)), not K^T",
+        EQ_GROUND), lambda H, K: _hp(np.linalg.solve(np.asarray(K, float).T, np.linalg.inv(np.asarray(H, float))))),
+    (_M("t_wrong_column", "t from the wrong column: [r1 r2 t] = lambda M, so t = lambda M[:, 2] (the third "
+        "column), r1 and r2 are the first two", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), t_col=0)),
+    (_M("t_wrong_column", "t from the wrong column: [r1 r2 t] = lambda M, so t = lambda M[:, 2] (the third "
+        "column), r1 and r2 are the first two", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), t_col=1)),
+    (_M("lambda_from_t", "lambda from t: r1 is a unit vector, t is not, so lambda = 1 / |M[:, 0]| (or the mean of "
+        "|M[:, 0]| and |M[:, 1]|), never 1 / |M[:, 2]|", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), lam_col=2)),
+    (_M("height_in_mm", "the height in millimetres: the ground homography is in metres, return metres", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [1000.0, 1.0]),
+    (_M("height_in_cm", "the height in centimetres: the ground homography is in metres, return metres", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [100.0, 1.0]),
+    (_M("height_is_t_z", "t_z used as the height: t is the robot's origin in CAMERA coordinates (its depth); the "
+        "height is the z of the camera centre C = -R^T t in the robot frame", EQ_GROUND),
+     lambda H, K: _hp(_M_of(H, K), height="t_z")),
+    (_M("height_is_C_x", "C_x used as the height: the robot frame's z axis points up, so the height is C[2] "
+        "(C[0] is how far ahead of the axle the camera sits)", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), height="C_x")),
+    (_M("C_is_minus_R_t", "C = -R t: the camera centre is C = -R^T t (R maps robot to camera coordinates, its "
+        "transpose maps back)", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), height="Rt")),
+    (_M("pitch_from_vertical", "the pitch measured from the vertical: it is the angle BELOW THE HORIZON, "
+        "asin(-R[2, 2]) = 90 deg minus the angle from the vertical", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [1.0, -1.0] + [0.0, 90.0]),
+    (_M("outputs_swapped", "the two outputs are swapped: return [height in metres, pitch in degrees]", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K)[::-1]),
+    (_M("abs_pitch", "abs() on the pitch: a camera pitched UP has a negative pitch below the horizon; keep the "
+        "sign of asin(-R[2, 2])", EQ_GROUND), lambda H, K: np.abs(_height_pitch(H, K))),
 ])
+
+
+def _M_of(H, K) -> np.ndarray:
+    """M = K^-1 H^-1 = lambda [r1 r2 t]."""
+    return np.linalg.solve(np.asarray(K, float), np.linalg.inv(np.asarray(H, float)))
+
+
+def _hp(M: np.ndarray, *, lam_col: int = 0, t_col: int = 2, height: str = "C_z") -> np.ndarray:
+    """[height, pitch] by the pipeline of the hint (lambda from the first column, sign from a ground point 0.3 m
+    ahead, R made orthonormal, C = -R^T t), with one step as a mistake names it."""
+    lam = 1.0 / np.linalg.norm(M[:, lam_col])
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, t_col]
+    if (0.3 * r1 + lam * M[:, 2])[2] < 0:
+        r1, r2, t = -r1, -r2, -t
+    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    R = U @ Wt
+    h = {"C_z": (-R.T @ t)[2], "C_x": (-R.T @ t)[0], "t_z": t[2], "Rt": (-R @ t)[2]}[height]
+    return np.array([float(h), float(np.degrees(np.arcsin(np.clip(-R[2, 2], -1, 1))))])
 
 
 def _rt_of(M: np.ndarray, first: bool = False):

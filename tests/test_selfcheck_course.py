@@ -356,6 +356,8 @@ def test_pixel_to_ground_opencv_cases_are_needed(wrong):
 
 def test_pixel_to_ground_pass_fail_stub():
     assert status(nb05.check_pixel_to_ground, ref_p2g) == PASS
+    rep = _quiet(nb05.check_pixel_to_ground, cv2_p2g)  # OpenCV's routine computes the exercise: refused
+    assert not rep.passed and "calls cv2.perspectiveTransform, which does the exercise for you" in rep.text()
     assert status(nb05.check_pixel_to_ground, stub) == NOT_IMPLEMENTED
     for wrong in (p2g_transposed, p2g_no_divide, p2g_divide_by_h33, p2g_float32, p2g_rounded_H):
         assert status(nb05.check_pixel_to_ground, wrong) == FAIL, wrong.__name__

@@ -24,7 +24,7 @@ from ..boards import DUCKIETOWN_BOARD
 from ..camera import intrinsic_matrix, new_camera_matrix
 from ..camera import undistort_normalized as newton
 from ..errors import DtscalError
-from ..exercise_rules import PRECISION_RTOL, float32_sized, relative_error, return_type_problem
+from ..exercise_rules import PRECISION_RTOL, float32_sized, raises_problem, relative_error, return_type_problem
 from ..mistakes import precision_problem, probe_args, robot_ground_homography
 from ..poses import board_homography, points_on_rays, random_board_pose
 from .metrics import K_max_px, apply_homography, pose_errors, shape_key, truth_rms_px
@@ -388,9 +388,8 @@ def judge_raises(built: Built, run: CheckRun):
         if c.ok:
             return 0.0, f"should raise ValueError (the input does not determine the answer), but returned " \
                         f"{_describe_value(c.value)}"
-        if not c.error.startswith("ValueError") or "math domain error" in c.error:
-            return 0.0, f"should raise ValueError saying what is wrong (check the number of views first), " \
-                        f"raised {c.error}"
+        if raises_problem(c.error):
+            return 0.0, raises_problem(c.error)
     return 1.0, ""
 
 

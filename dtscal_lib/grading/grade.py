@@ -46,8 +46,8 @@ GRADER_ERROR_STATUS = "grader error"
 GRADER_ATTEMPTS = 3
 GRADER_RETRY_PAUSE_S = (1.0, 3.0)
 FORM_GATED = ("no points for form yet: none of this function's answers is right on any case, and checks of form "
-              "(dtype, shape, inputs untouched, raising, H[2, 2] = 1) count only once the values are right on at "
-              "least one case")
+              "(dtype, shape, inputs untouched, raising, H[2, 2] = 1, precision) count only once the values are "
+              "right on at least one case")
 
 
 @dataclass

@@ -125,6 +125,7 @@ def check_camera_height_pitch(fn: Callable) -> Report:
         _case_robot(0.2, 40.0, -3.0, 0.0, -7.5, "a higher, steeper camera; H times -7.5 (any scale and sign)", hint=(
             "H is defined up to scale and sign: fix lambda's sign so that a ground point ahead of the robot, "
             "e.g. (0.3, 0), is in front of the camera (positive depth)")),
-        _case_robot(0.06, 8.0, 0.0, 0.1, 1.0, "a low camera looking almost straight ahead", hint=(
-            "return np.array([height_in_metres, pitch_in_degrees]) (float64, shape (2,))")),
+        _case_robot(0.06, -4.0, 0.0, 0.1, 1.0, "a low camera looking almost straight ahead", hint=(
+            "return np.array([height_in_metres, pitch_in_degrees]) (float64, shape (2,)); this camera looks 4 deg UP: "
+            "the pitch below the horizon is negative (no abs())")),
     ])
