@@ -435,17 +435,20 @@ def live_charges(func: str, fn) -> tuple[str, str]:
 
 
 def rules_markdown(notebook: str) -> str:
-    """The notebook's rule cell, generated from its table (a test compares the notebook's text with it)."""
+    """The notebook's rule cell, generated from its table (``tests/test_exercise_rules.py`` compares the
+    notebook's text with it)."""
     r = NOTEBOOKS[notebook]
-    lines = ["### Rules of this notebook's exercises", "",
-             f"- **Imports**: inside an exercise function use {allowed_words(notebook)} only: no SciPy, no OpenCV "
-             "(`import cv2` at the top is for the plots). The self-check and the grader refuse anything else.",
-             "- **Returns**: numpy arrays; " + "; ".join(
-                 f"`{f}`: {RETURNS[f].shape} {RETURNS[f].dtype}" for f in r.functions)
-             + ". A list is refused by the return-type check (its values still count).",
-             "- **Precision**: compute in float64; float32 arithmetic inside fails the checks.",
-             ]
-    for f, cv in r.shortcuts:
-        lines.append(f"- **Forbidden**: `{f}` may not call " + ", ".join(f"`cv2.{c}`" for c in cv)
-                     + " (it computes the exercise): no credit for the function that calls it.")
+    lines = ["### The rules of the exercises (the self-check and the grader apply the same)", "",
+             f"- **Imports** inside an exercise function: {allowed_words(notebook).replace('math', '`math`')}. "
+             "No SciPy (`numpy.linalg` has `svd`, `eigh`, `norm`, `solve`, `cholesky`), no OpenCV "
+             "(`import cv2` at the top is for the figures)."]
+    if r.shortcuts:
+        lines.append("- **Forbidden shortcuts**: " + "; ".join(
+            f"`{f}` may not call " + " or ".join(f"`cv2.{c}`" for c in cv) for f, cv in r.shortcuts)
+            + ". Each computes the exercise: the function that makes the call gets no credit (that function "
+            "only, once).")
+    lines += ["- **Returns**: numpy arrays, " + "; ".join(
+                  f"`{f}`: {RETURNS[f].shape} {RETURNS[f].dtype}" for f in r.functions)
+              + ". A list is refused by the return-type check (its values still count).",
+              "- **Precision**: compute in float64; float32 arithmetic inside fails the checks."]
     return "\n".join(lines)
