@@ -391,6 +391,8 @@ def _user_module(name) -> bool:
     """Is the module called ``name`` the student's code (a notebook's ``__main__``, a script), not a library?"""
     if not isinstance(name, str) or not name:
         return False
+    if name == "__main__":  # a notebook's cells (Jupyter's __main__ may be a launcher in site-packages)
+        return True
     top = name.split(".")[0]
     if top in ("numpy", "cv2", "scipy", "dtscal_lib", "builtins") or top in sys.stdlib_module_names:
         return False
