@@ -4,9 +4,13 @@
 `grading/` folder out, and a test scans the hand-out for these seeds.
 
 Each check: `name` (shown to the student), `weight` (points), `seed` (inputs are drawn
-from it), `judge` (close | unchanged | dtype | raises | scaled | truth_H | truth_K | truth_pose) and
-the input parameters of its function (see dtscal_lib/grading/checks.py). Change the
-seeds each term: the answers are recomputed from the solution notebooks.
+from it), `judge` (close | unchanged | dtype | raises | scaled | truth_H | truth_K | truth_pose |
+precision) and the input parameters of its function (see dtscal_lib/grading/checks.py). Each
+kind is a dataclass (dtscal_lib/grading/specs.py): a key it does not know is an error naming it.
+`h33` scales the input homographies so that H[2, 2] = h33 (code dividing H in place shows);
+"random scale and sign" checks alternate the sign, first case negative (never left to the seed);
+`precision` runs the mistake catalogue's exact probes (dtscal_lib/mistakes.py), as the self-check
+does. Change the seeds each term: the answers are recomputed from the solution notebooks.
 """
 
 POINTS_PER_FUNCTION = 10
@@ -22,6 +26,7 @@ CHECKS = {
         dict(name="a single point (N = 1)", weight=1, seed=640187, views=2, n=1, atol=1e-6, rtol=0.0),
         dict(name="returns float64 (N, 2)", weight=1, seed=640189, views=1, n=13, judge="dtype"),
         dict(name="inputs not modified", weight=2, seed=640193, views=1, n=9, judge="unchanged"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "apply_homography": [
         dict(name="board homographies at random scale and sign", weight=4, seed=640211, views=4, n=25,
@@ -30,7 +35,9 @@ CHECKS = {
              atol=0.0, rtol=1e-9),
         dict(name="a single point (N = 1)", weight=1, seed=640229, views=2, n=1, atol=1e-9, rtol=1e-9),
         dict(name="returns float64 (N, 2)", weight=1, seed=640231, views=1, n=6, judge="dtype"),
-        dict(name="inputs not modified", weight=2, seed=640237, views=1, n=8, judge="unchanged"),
+        dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640237, views=1, n=8, h33=-2.5,
+             judge="unchanged"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "estimate_homography": [
         dict(name="4 exact correspondences (minimal input)", weight=2, seed=640247, views=3, n=4,
@@ -46,13 +53,17 @@ CHECKS = {
              sigma=1.0, offset=2.0e4, span=3.0, judge="truth_H"),
         dict(name="H[2, 2] = 1", weight=1, seed=640261, views=1, n=12, judge="scaled"),
         dict(name="inputs not modified", weight=1, seed=640267, views=1, n=10, judge="unchanged"),
+        dict(name="returns float64 (3, 3)", weight=1, seed=640268, views=1, n=9, judge="dtype"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "intrinsic_constraints": [
         dict(name="random homographies", weight=5, seed=640271, views=3, random_H=True, atol=0.0, rtol=1e-10),
         dict(name="board homographies of a skewed camera", weight=3, seed=640277, views=3, atol=0.0,
              rtol=1e-10),
         dict(name="returns float64 (2, 6)", weight=1, seed=640279, views=1, judge="dtype"),
-        dict(name="inputs not modified", weight=1, seed=640283, views=1, judge="unchanged"),
+        dict(name="inputs not modified (H[2, 2] != 1)", weight=1, seed=640283, views=1, h33=3.0,
+             judge="unchanged"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "intrinsics_from_homographies": [
         dict(name="3 exact views (minimal input), skewed camera", weight=3, seed=640289, views=3, atol=0.0,
@@ -65,6 +76,9 @@ CHECKS = {
         dict(name="fewer than 3 views must raise ValueError", weight=1, seed=640301, views=2, judge="raises"),
         dict(name="a single view must raise ValueError", weight=1, seed=640302, views=1, judge="raises"),
         dict(name="returns float64 (3, 3)", weight=1, seed=640303, views=4, judge="dtype"),
+        dict(name="the list of homographies not modified (H[2, 2] != 1)", weight=1, seed=640304, views=4,
+             h33=-4.0, judge="unchanged"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "extrinsics_from_homography": [
         dict(name="exact poses from homographies at random scale and sign", weight=4, seed=640307, views=4,
@@ -72,7 +86,10 @@ CHECKS = {
         dict(name="noisy homographies (0.5 px): a proper rotation near the true pose", weight=4,
              # 11.6 deg, 12.5 % of |t| (max 9.25 deg, 9.9 % over 10000 draws x 4 formulations x1.25)
              seed=640319, views=4, sigma=0.5, camera="duckie", judge="truth_pose"),
-        dict(name="inputs not modified", weight=2, seed=640321, views=1, judge="unchanged"),
+        dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640321, views=1, h33=-2.0,
+             judge="unchanged"),
+        dict(name="returns float64 (R (3, 3), t (3,))", weight=1, seed=640322, views=1, judge="dtype"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "distort_normalized": [
         dict(name="tangential lens", weight=3, seed=640327, n=40, lens="tangential", atol=1e-10, rtol=0.0),
@@ -81,6 +98,7 @@ CHECKS = {
              region="image", atol=1e-10, rtol=0.0),
         dict(name="returns float64 (N, 2)", weight=1, seed=640343, n=7, judge="dtype"),
         dict(name="inputs not modified", weight=1, seed=640349, n=7, judge="unchanged"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "undistort_normalized": [
         dict(name="mild tangential lens", weight=3, seed=640351, n=40, lens="tangential", radius=0.6,
@@ -90,6 +108,9 @@ CHECKS = {
         dict(name="no distortion", weight=1, seed=640363, n=10, lens="none", atol=1e-12, rtol=0.0),
         dict(name="inputs not modified", weight=2, seed=640369, n=10, lens="tangential", radius=0.5,
              judge="unchanged"),
+        dict(name="returns float64 (N, 2)", weight=1, seed=640370, n=6, lens="tangential", radius=0.5,
+             judge="dtype"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "rectification_maps": [
         dict(name="the Duckiebot, ROS's new camera matrix (alpha = 0)", weight=3, seed=640373, alpha=0.0,
@@ -109,13 +130,16 @@ CHECKS = {
              atol=1e-12, rtol=0.0),
         dict(name="returns float64 (N, 2)", weight=2, seed=640399, boards=[(5, 4, 0.03, 0.2, -0.06)],
              judge="dtype"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "pixel_to_ground": [
         dict(name="ground homographies", weight=4, seed=640403, views=3, n=25, atol=1e-9, rtol=1e-9),
         dict(name="the same homographies at random scale and sign", weight=3, seed=640409, views=3, n=25,
              random_scale=True, atol=1e-9, rtol=1e-9),
         dict(name="returns float64 (N, 2)", weight=1, seed=640411, views=1, n=5, judge="dtype"),
-        dict(name="inputs not modified", weight=2, seed=640417, views=1, n=5, judge="unchanged"),
+        dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640417, views=1, n=5, h33=-1.7,
+             judge="unchanged"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "camera_height_pitch": [
         # noise-free ground homographies of cameras placed by hand: every accepted formulation (lambda from the
@@ -125,7 +149,12 @@ CHECKS = {
              atol=1e-6, rtol=0.0),
         dict(name="the same at random scale and sign of H", weight=3, seed=640423, views=4, random_scale=True,
              atol=1e-6, rtol=0.0),
+        # a camera pitched up (a negative pitch below the horizon) shows abs() on the pitch
+        dict(name="cameras pitched 2-15 deg UP (negative pitch)", weight=2, seed=640425, views=3,
+             pitch=(-15.0, -2.0), atol=1e-6, rtol=0.0),
         dict(name="returns float64 (2,)", weight=1, seed=640427, views=1, judge="dtype"),
-        dict(name="inputs not modified", weight=2, seed=640429, views=1, judge="unchanged"),
+        dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640429, views=1, h33=-3.0,
+             judge="unchanged"),
+        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
 }

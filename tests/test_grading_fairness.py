@@ -279,28 +279,28 @@ def test_code_that_computes_nothing_scores_zero(tmp_path, material, assignment):
 #: the partial-credit formula (e.g. round(fraction) * weight) or in a tolerance moves them
 PINNED = {
     "01_pinhole_projection__K_transposed": 0, "01_pinhole_projection__R_transposed": 0,
-    "01_pinhole_projection__float32": 0, "01_pinhole_projection__modifies_input": 8,
-    "01_pinhole_projection__no_division": 0, "01_pinhole_projection__skew_dropped": 4,
-    "01_pinhole_projection__squeeze": 9, "01_pinhole_projection__t_subtracted": 0,
+    "01_pinhole_projection__float32": 0, "01_pinhole_projection__modifies_input": 8.18,
+    "01_pinhole_projection__no_division": 0, "01_pinhole_projection__skew_dropped": 4.55,
+    "01_pinhole_projection__squeeze": 9.09, "01_pinhole_projection__t_subtracted": 0,
     "01_pinhole_projection__uv_swapped": 0, "02_homography__apply_H_inverted": 0,
     "02_homography__apply_H_transposed": 0, "02_homography__apply_no_division": 0,
     "02_homography__estimate_H_transposed": 10, "02_homography__estimate_bad_denormalization": 10,
-    "02_homography__estimate_no_denormalization": 10, "02_homography__estimate_no_normalization": 18,
-    "02_homography__estimate_not_scaled": 15, "03_intrinsic_calibration__K_lambda_ignored": 10,
-    "03_intrinsic_calibration__K_no_raise": 18, "03_intrinsic_calibration__K_principal_point": 15,
-    "03_intrinsic_calibration__K_skew_dropped": 15, "03_intrinsic_calibration__b_order": 0,
-    "03_intrinsic_calibration__pose_board_behind": 9, "03_intrinsic_calibration__pose_not_orthonormalized": 6,
+    "02_homography__estimate_no_denormalization": 10, "02_homography__estimate_no_normalization": 18.33,
+    "02_homography__estimate_not_scaled": 15.83, "03_intrinsic_calibration__K_lambda_ignored": 10,
+    "03_intrinsic_calibration__K_no_raise": 18.33, "03_intrinsic_calibration__K_principal_point": 15.83,
+    "03_intrinsic_calibration__K_skew_dropped": 15.83, "03_intrinsic_calibration__b_order": 0,
+    "03_intrinsic_calibration__pose_board_behind": 8.33, "03_intrinsic_calibration__pose_not_orthonormalized": 6.67,
     "03_intrinsic_calibration__rows_not_columns": 0, "03_intrinsic_calibration__second_as_sum": 0,
-    "04_distortion_rectification__distort_pixels": 14, "04_distortion_rectification__k3_ignored": 7,
+    "04_distortion_rectification__distort_pixels": 14, "04_distortion_rectification__k3_ignored": 7.27,
     "04_distortion_rectification__maps_float64": 17, "04_distortion_rectification__maps_swapped": 10,
     "04_distortion_rectification__maps_transposed": 10, "04_distortion_rectification__new_K_ignored": 14,
-    "04_distortion_rectification__radial_in_r": 0, "04_distortion_rectification__tangential_swapped": 5,
-    "04_distortion_rectification__undistort_fixed_iterations": 13,
-    "04_distortion_rectification__undistort_fixed_point_stalls": 16,
+    "04_distortion_rectification__radial_in_r": 0, "04_distortion_rectification__tangential_swapped": 5.45,
+    "04_distortion_rectification__undistort_fixed_iterations": 14.17,
+    "04_distortion_rectification__undistort_fixed_point_stalls": 16.67,
     "05_extrinsic_calibration__axes_swapped": 0, "05_extrinsic_calibration__column_order": 0,
     "05_extrinsic_calibration__from_left": 0, "05_extrinsic_calibration__off_by_one": 0,
     "05_extrinsic_calibration__pixel_H_transposed": 0, "05_extrinsic_calibration__pixel_no_division": 0,
-    "02_homography__estimate_denormalization_order": 10, "03_intrinsic_calibration__K_principal_point_fx": 15,
+    "02_homography__estimate_denormalization_order": 10, "03_intrinsic_calibration__K_principal_point_fx": 15.83,
     "04_distortion_rectification__distort_pixel_offsets": 14,
     "04_distortion_rectification__maps_float64_transposed": 10, "05_extrinsic_calibration__from_far_row": 0,
     "05_extrinsic_calibration__camera_H_not_inverted": 0, "05_extrinsic_calibration__camera_height_sign": 0,
@@ -349,3 +349,98 @@ def test_partial_credit_is_the_fraction_of_cases_times_the_weight(mistake_result
     t = next(t for t in f.tests if t.name.startswith("exact poses"))
     assert (t.score, t.max_score) == (3.0, 4.0)
     assert "wrong on 1 of 4 case(s)" in t.output and "case 4: the right answer with the opposite sign" in t.output
+
+
+# --------------------------------------------------------------------------- one rule table (issue 28, item 2)
+RULES = Path(__file__).parent / "grading_corpus_rules"
+
+
+@pytest.fixture(scope="module")
+def rules_results(material):
+    items, skipped = discover(RULES)
+    assert not skipped
+    return {Path(r.submission).stem: r for r in grade_all(items, material, jobs=2)}
+
+
+def _self_checks(path: Path) -> dict:
+    """The public self-check's report of every exercise function ``path`` defines (run in this process)."""
+    import contextlib
+    import io
+
+    import dtscal_lib.teaching.selfcheck as sc
+
+    ns = runpy.run_path(str(path), run_name=f"student_{path.stem}")
+    assignment = next(a for a in ASSIGNMENTS if path.name.startswith(a))
+    out = {}
+    for func in ASSIGNMENTS[assignment]:
+        if func in ns:
+            with contextlib.redirect_stdout(io.StringIO()):
+                out[func] = getattr(sc, f"check_{func}")(ns[func])
+    return out
+
+
+def _agree(res, reports) -> list[str]:
+    """The functions on which the self-check and the grader disagree (self-check passes <=> full marks)."""
+    return [f"{f.name}: self-check {reports[f.name].status}, grader {f.score:g} / {f.max_score:g}\n"
+            f"{reports[f.name].text()}\n{text(res)}"
+            for f in res.functions if f.name in reports and reports[f.name].passed != (f.score == f.max_score)]
+
+
+@pytest.mark.parametrize("corpus", ["grading_corpus", "grading_corpus_correct", "grading_corpus_rules"])
+def test_self_check_passes_exactly_when_the_grader_gives_full_marks(corpus, mistake_results, correct_results,
+                                                                    rules_results):
+    results = {"grading_corpus": mistake_results, "grading_corpus_rules": rules_results,
+               "grading_corpus_correct": {Path(k).stem: v for k, v in correct_results.items()}}[corpus]
+    paths = sorted((Path(__file__).parent / corpus).glob("*.py"))
+    assert len(paths) >= 10
+    bad = [d for p in paths for d in _agree(results[p.stem], _self_checks(p))]
+    assert not bad, "\n\n".join(bad[:3])
+
+
+@pytest.mark.parametrize("path", sorted(RULES.glob("*.py")), ids=lambda p: p.stem)
+def test_a_broken_rule_charges_its_function_once_with_the_same_words(path, rules_results):
+    src = path.read_text()
+    charged = {f.strip() for f in re.search(r"# charged: (.*)", src).group(1).split(",")}
+    expect = re.search(r"# expect: (.*)", src).group(1).strip()
+    res, reports = rules_results[path.stem], _self_checks(path)
+    lost = {f.name for f in res.functions if f.score < f.max_score}
+    assert lost == charged, text(res)  # the function that breaks the rule, and no other (one call, one charge)
+    assert {f for f, r in reports.items() if not r.passed} == charged
+    assert expect in text(res)
+    for f in res.functions:
+        if f.status in ("academic honesty", "not allowed"):  # refused: the self-check says what the grader says
+            assert f.tests[0].output in reports[f.name].text(), reports[f.name].text()
+
+
+def _refs_submission(tmp_path: Path, assignment: str, defs: dict) -> Path:
+    """A submission made of tests/selfcheck_refs.py's functions (their source), each exercise a thin wrapper."""
+    import inspect
+
+    import selfcheck_refs as refs
+
+    used = sorted({name for fn in defs.values() for name in fn})
+    src = ["import math", "", "import cv2", "import numpy as np", ""]
+    src += [inspect.getsource(getattr(refs, name)) for name in used]
+    for func, (name, *_rest) in defs.items():
+        src.append(f"def {func}(*args):\n    return {name}(*args)\n")
+    path = tmp_path / f"{assignment}__{'_'.join(n for n, *_ in defs.values())}.py"
+    path.write_text("\n\n".join(src), encoding="utf-8")
+    return path
+
+
+def test_self_check_agrees_with_the_grader_on_the_self_check_references(tmp_path, material):
+    subs = [_refs_submission(tmp_path, "03_intrinsic_calibration", {
+                "intrinsic_constraints": ("ref_constraints",),
+                "intrinsics_from_homographies": ("ref_intrinsics", "ref_constraints")}),
+            _refs_submission(tmp_path, "04_distortion_rectification", {
+                "distort_normalized": ("np_distort",), "undistort_normalized": ("np_undistort", "np_distort"),
+                "rectification_maps": ("np_maps", "np_distort")})]
+    subs += [_refs_submission(tmp_path, "05_extrinsic_calibration", {"pixel_to_ground": (name, "ref_p2g")})
+             for name in ("ref_p2g", "p2g_transposed", "p2g_no_divide", "cv2_p2g")]
+    results = {p.stem: grade_file(p, material, p.stem.split("__")[0]) for p in subs}
+    bad = [d for p in subs for d in _agree(results[p.stem], _self_checks(p))]
+    assert not bad, "\n\n".join(bad[:3])
+    full = {p.stem.split("__")[1]: [f.score == f.max_score for f in results[p.stem].functions
+                                    if f.status != "missing"] for p in subs}
+    assert full["ref_p2g"] == [True] and full["cv2_p2g"] == [False]
+    assert all(full["np_distort_np_undistort_np_maps"])

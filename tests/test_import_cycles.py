@@ -77,8 +77,7 @@ def test_a_planted_cycle_is_found():
 
 
 # The folder rule (issue 23): the calibration library never imports the teaching layer. Every import counts
-# here, those inside functions too; only ``cli.py`` may reach ``teaching.command`` (to register its commands),
-# and the grader (``grading/``) names mistakes with ``teaching.selfcheck.diagnosis``.
+# here, those inside functions too; only ``cli.py`` may reach ``teaching.command`` (to register its commands).
 ALLOWED = {"cli.py": {"dtscal_lib.teaching.command", "dtscal_lib.teaching.command.add_parsers"}}
 OUTSIDE_RULE = ("teaching", "grading")
 
@@ -157,3 +156,103 @@ def test_a_planted_function_level_circle_in_the_grader_is_found(tmp_path):
     metrics = tmp_path / "grading" / "metrics.py"
     metrics.write_text(metrics.read_text() + "\n\ndef _late():\n    from .checks import num\n    return num\n")
     assert _cycle(_grading_graph(tmp_path)) is not None
+
+
+# Issue 28, item 10: the two wings. The grader (``dtscal_lib/grading/`` and the instructor's hidden cases in the
+# top-level ``grading/`` folder) never imports the teaching wing (``dtscal_lib/teaching/``), nor the teaching wing
+# the grader, inside functions neither; what both need (the mistake catalogue ``dtscal_lib/mistakes.py``, the
+# rule table ``dtscal_lib/exercise_rules.py``, the notebook format ``dtscal_lib/notebook_format.py``) lives
+# outside both. And no import circle anywhere in the library, function-level imports included.
+KIT = ROOT.parent
+WINGS = {"teaching": "dtscal_lib.teaching", "grading": "dtscal_lib.grading"}
+
+
+def _wing_files(root: Path) -> dict[str, list[Path]]:
+    files = {w: sorted((root / "dtscal_lib" / w).rglob("*.py")) for w in WINGS}
+    files["grading"] += sorted((root / "grading").glob("*.py"))  # the hidden cases are the grader's
+    return files
+
+
+def _imports_anywhere(path: Path, root: Path) -> set[str]:
+    """Every module ``path`` imports, at any depth (relative imports resolved inside ``dtscal_lib``)."""
+    lib = root / "dtscal_lib"
+    if lib in path.parents:
+        return _all_imports(path, lib)
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and not node.level:
+            out.add(node.module or "")
+            out.update(f"{node.module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+    return out
+
+
+def _wing_crossings(root: Path) -> dict[str, list[str]]:
+    found = {}
+    for wing, files in _wing_files(root).items():
+        other = next(m for w, m in WINGS.items() if w != wing)
+        for path in files:
+            hits = sorted(m for m in _imports_anywhere(path, root) if m == other or m.startswith(other + "."))
+            if hits:
+                found[path.relative_to(root).as_posix()] = hits
+    return found
+
+
+def test_neither_wing_imports_the_other():
+    files = _wing_files(KIT)
+    assert len(files["teaching"]) > 10 and KIT / "grading" / "cases.py" in files["grading"]
+    assert _wing_crossings(KIT) == {}
+
+
+def test_a_planted_wing_crossing_is_found(tmp_path):
+    for rel, text in {"dtscal_lib/grading/grade.py": "def f():\n    from ..teaching.selfcheck import core\n",
+                      "dtscal_lib/teaching/release.py": "import dtscal_lib.grading.material\n",
+                      "dtscal_lib/teaching/selfcheck/x.py": "def g():\n    from ...grading import checks\n",
+                      "grading/cases.py": "from dtscal_lib.teaching import selfcheck\n"}.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text, encoding="utf-8")
+    assert _wing_crossings(tmp_path) == {
+        "dtscal_lib/grading/grade.py": ["dtscal_lib.teaching.selfcheck", "dtscal_lib.teaching.selfcheck.core"],
+        "dtscal_lib/teaching/release.py": ["dtscal_lib.grading.material"],
+        "dtscal_lib/teaching/selfcheck/x.py": ["dtscal_lib.grading", "dtscal_lib.grading.checks"],
+        "grading/cases.py": ["dtscal_lib.teaching", "dtscal_lib.teaching.selfcheck"],
+    }
+
+
+def _full_graph(root: Path) -> dict[str, set[str]]:
+    """The library's import graph with imports inside functions too (a module importing a package's name
+    depends on that package's ``__init__`` and, when the name is a module, on that module)."""
+    mods = {}
+    for p in root.rglob("*.py"):
+        parts = ("dtscal_lib",) + p.relative_to(root).with_suffix("").parts
+        mods[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = p
+    graph = {}
+    for m, p in mods.items():
+        graph[m] = {t for t in _all_imports(p, root) if t in mods and t != m}
+    return graph
+
+
+SHARED = ("dtscal_lib.mistakes", "dtscal_lib.exercise_rules", "dtscal_lib.notebook_format")
+
+
+def _wings_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    keep = lambda m: m.startswith(tuple(WINGS.values())) or m in SHARED  # noqa: E731
+    return {m: {t for t in ts if keep(t)} for m, ts in graph.items() if keep(m)}
+
+
+def test_no_import_circle_in_the_wings_even_inside_functions():
+    graph = _full_graph(ROOT)
+    assert "dtscal_lib.mistakes" in graph["dtscal_lib.teaching.selfcheck.core"]
+    assert "dtscal_lib.mistakes" in graph["dtscal_lib.grading.grade"]
+    sub = _wings_graph(graph)
+    assert _cycle(sub) is None, " -> ".join(_cycle(sub))
+
+
+def test_a_planted_function_level_circle_in_the_self_checks_is_found(tmp_path):
+    import shutil
+
+    shutil.copytree(ROOT / "teaching" / "selfcheck", tmp_path / "teaching" / "selfcheck")
+    core = tmp_path / "teaching" / "selfcheck" / "core.py"
+    core.write_text(core.read_text() + "\n\ndef _late():\n    from .homography import check_apply_homography\n")
+    assert _cycle(_wings_graph(_full_graph(tmp_path))) is not None

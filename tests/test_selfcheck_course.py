@@ -14,7 +14,8 @@ import pytest
 from dtscal_lib import camera as cam
 from dtscal_lib.teaching.selfcheck import FAIL, NOT_IMPLEMENTED, PASS
 from dtscal_lib.teaching.selfcheck import zhang as nb03, distortion as nb04, ground as nb05
-from selfcheck_refs import _quiet, p2g_no_divide, p2g_transposed, ref_constraints, ref_intrinsics, ref_p2g, status, stub
+from selfcheck_refs import (_quiet, cv2_p2g, np_distort, np_maps, np_undistort, p2g_no_divide, p2g_transposed,
+                            ref_constraints, ref_intrinsics, ref_p2g, status, stub)
 
 
 # =========================================================================== nb03 references
@@ -154,34 +155,29 @@ def test_synthetic_views_are_exact_and_in_front():
 
 
 # =========================================================================== nb04 references
-def ref_distort(xy, dist):
-    return cam.distort_normalized(xy, dist)
+ref_distort, ref_undistort, ref_maps = np_distort, np_undistort, np_maps
 
 
-def ref_undistort(xy_d, dist):
-    return cam.undistort_normalized(xy_d, dist)
-
-
-def ref_maps(K, dist, new_K, size):
-    # OpenCV with the roles spelled out (the check compares with the same function, so also
-    # exercise the library's independent implementation below)
+def cv2_maps(K, dist, new_K, size):
+    # OpenCV's routine computes the exercise: refused by the self-check with the grader's words
     return cv2.initUndistortRectifyMap(K, dist, None, new_K, tuple(size), cv2.CV_32FC1)
 
 
 def lib_maps(K, dist, new_K, size):
+    # the kit's own library holds the exercise too: refused the same way
     return cam.rectification_maps(K, dist, new_K, size)
 
 
 def distort_wrong_tangential_sign(xy, dist):
     d = np.array(dist, float)
     d[2:4] = -d[2:4]
-    return cam.distort_normalized(xy, d)
+    return np_distort(xy, d)
 
 
 def distort_swapped_p(xy, dist):
     d = np.array(dist, float)
     d[[2, 3]] = d[[3, 2]]
-    return cam.distort_normalized(xy, d)
+    return np_distort(xy, d)
 
 
 def distort_r_not_squared(xy, dist):
@@ -211,25 +207,25 @@ def undistort_opencv_default(xy_d, dist):
 
 
 def undistort_returns_distorted(xy_d, dist):  # "forgot to invert": distorts again
-    return cam.distort_normalized(xy_d, dist)
+    return np_distort(xy_d, dist)
 
 
 def maps_swapped(K, dist, new_K, size):
-    mx, my = cam.rectification_maps(K, dist, new_K, size)
+    mx, my = np_maps(K, dist, new_K, size)
     return my, mx
 
 
 def maps_transposed_shape(K, dist, new_K, size):
-    mx, my = cam.rectification_maps(K, dist, new_K, size)
+    mx, my = np_maps(K, dist, new_K, size)
     return np.ascontiguousarray(mx.T), np.ascontiguousarray(my.T)
 
 
 def maps_ignore_new_K(K, dist, new_K, size):
-    return cam.rectification_maps(K, dist, K, size)
+    return np_maps(K, dist, K, size)
 
 
 def maps_float64(K, dist, new_K, size):
-    return cam.rectification_maps(K, dist, new_K, size, dtype=np.float64)
+    return np_maps(K, dist, new_K, size, dtype=np.float64)
 
 
 def maps_undistort_instead(K, dist, new_K, size):  # inverse direction: undistorts pixel positions
@@ -271,7 +267,9 @@ def test_fixed_point_fails_only_at_the_corners():
 
 def test_maps_pass_fail_stub():
     assert status(nb04.check_rectification_maps, ref_maps) == PASS
-    assert status(nb04.check_rectification_maps, lib_maps) == PASS
+    for shortcut, words in ((cv2_maps, "cv2.initUndistortRectifyMap"), (lib_maps, "dtscal_lib.camera")):
+        rep = _quiet(nb04.check_rectification_maps, shortcut)
+        assert not rep.passed and f"calls {words}" in rep.text() and "academic honesty" in rep.text()
     assert status(nb04.check_rectification_maps, stub) == NOT_IMPLEMENTED
     for wrong in (maps_swapped, maps_transposed_shape, maps_ignore_new_K, maps_float64, maps_undistort_instead):
         assert status(nb04.check_rectification_maps, wrong) == FAIL, wrong.__name__
@@ -358,6 +356,8 @@ def test_pixel_to_ground_opencv_cases_are_needed(wrong):
 
 def test_pixel_to_ground_pass_fail_stub():
     assert status(nb05.check_pixel_to_ground, ref_p2g) == PASS
+    rep = _quiet(nb05.check_pixel_to_ground, cv2_p2g)  # OpenCV's routine computes the exercise: refused
+    assert not rep.passed and "calls cv2.perspectiveTransform, which does the exercise for you" in rep.text()
     assert status(nb05.check_pixel_to_ground, stub) == NOT_IMPLEMENTED
     for wrong in (p2g_transposed, p2g_no_divide, p2g_divide_by_h33, p2g_float32, p2g_rounded_H):
         assert status(nb05.check_pixel_to_ground, wrong) == FAIL, wrong.__name__

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from dtscal_lib.teaching.release import solution_functions
-from dtscal_lib.teaching.selfcheck import (check_apply_homography, check_estimate_homography, check_project_points,
-                                  diagnosis)
+from dtscal_lib import mistakes as diagnosis
+from dtscal_lib.teaching.selfcheck import check_apply_homography, check_estimate_homography, check_project_points
 from nbtools import SOLUTIONS
 
 CORPUS = Path(__file__).parent / "grading_corpus"

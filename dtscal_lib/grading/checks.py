@@ -24,9 +24,12 @@ from ..boards import DUCKIETOWN_BOARD
 from ..camera import intrinsic_matrix, new_camera_matrix
 from ..camera import undistort_normalized as newton
 from ..errors import DtscalError
+from ..exercise_rules import PRECISION_RTOL, float32_sized, raises_problem, relative_error, return_type_problem
+from ..mistakes import precision_problem, probe_args, robot_ground_homography
 from ..poses import board_homography, points_on_rays, random_board_pose
 from .metrics import K_max_px, apply_homography, pose_errors, shape_key, truth_rms_px
 from .sandbox import Call, CheckRun
+from .specs import typed
 
 CAMERAS = {
     "duckie": intrinsic_matrix(307.7, 315.0, 329.7, 244.5),
@@ -65,6 +68,20 @@ def _pose(rng, distance=(0.3, 0.9), max_deg=40.0):
     return random_board_pose(rng, DUCKIETOWN_BOARD, tilt_deg=(5.0, max_deg), distance=distance, spread=(0.2, 0.15))
 
 
+def _sign(rng, i: int) -> float:
+    """The sign of case ``i`` of a check "at random scale and sign": forced, never left to the seed. The first
+    case is negative and the signs alternate, so every such check holds both signs from two cases on. (The
+    random draw is kept so the other inputs stay those of the seed.)"""
+    rng.choice([-1.0, 1.0])
+    return -1.0 if i % 2 == 0 else 1.0
+
+
+def _rescaled(H, p: dict):
+    """``H`` scaled so that H[2, 2] = ``p["h33"]`` (a homography is defined up to scale; an input with
+    H[2, 2] != 1 shows code that divides it in place, ``H /= H[2, 2]``)."""
+    return H * (float(p["h33"]) / H[2, 2]) if p.get("h33") is not None else H
+
+
 def _img_span(K):
     return 2 * K[0, 2], 2 * K[1, 2]
 
@@ -93,11 +110,11 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
         for _ in range(views):
             R, t = _pose(rng)
             H = board_homography(CAMERAS[p.get("camera", "duckie")], R, t) * float(p.get("scale", 1.0))
-            H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 50.0) if p.get("random_scale") else H
+            H = H * _sign(rng, len(args)) * rng.uniform(0.5, 50.0) if p.get("random_scale") else H
             pts = np.column_stack([rng.uniform(-0.1, 0.3, n), rng.uniform(-0.1, 0.25, n)])
             if func == "pixel_to_ground":
                 H, pts = np.linalg.inv(H), _apply(H, pts)
-            args.append((H, pts))
+            args.append((_rescaled(H, p), pts))
             truth.append(_apply(H, pts))
         return args, truth
     if func == "estimate_homography":
@@ -127,8 +144,8 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             else:
                 H = board_homography(K, R, t)
             if p.get("random_scale"):
-                H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.01, 100.0)
-            Hs.append(H)
+                H = H * _sign(rng, len(Hs)) * rng.uniform(0.01, 100.0)
+            Hs.append(_rescaled(H, p))
             poses.append((R, t))
         if func == "intrinsic_constraints":
             Hs = Hs if not p.get("random_H") else [rng.normal(size=(3, 3)) * [[300.0], [300.0], [1.0]]
@@ -165,16 +182,14 @@ def inputs_and_truth(func: str, p: dict, rng) -> tuple[list[tuple], list]:
             truth.append(np.column_stack([x0 + (k // cols) * sq, y0 + (k % cols) * sq]))
         return [tuple(b) for b in boards], truth
     if func == "camera_height_pitch":  # robot cameras placed by hand: the height and pitch are the truth
-        from ..teaching.selfcheck.diagnosis import robot_ground_homography
-
         K = dt.default_P()[:, :3] if p.get("camera", "rectified") == "rectified" else CAMERAS[p["camera"]]
         args, truth = [], []
         for _ in range(views):
-            height, pitch = rng.uniform(0.05, 0.3), rng.uniform(5.0, 50.0)
+            height, pitch = rng.uniform(0.05, 0.3), rng.uniform(*p.get("pitch", (5.0, 50.0)))
             H = robot_ground_homography(K, height, pitch, yaw_deg=rng.uniform(-4.0, 4.0), x=rng.uniform(0.0, 0.1))
             if p.get("random_scale"):
-                H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.01, 100.0)
-            args.append((H, K.copy()))
+                H = H * _sign(rng, len(args)) * rng.uniform(0.01, 100.0)
+            args.append((_rescaled(H, p), K.copy()))
             truth.append(np.array([height, pitch]))
         return args, truth
     raise MaterialError(f"no exercise function named {func}")
@@ -271,13 +286,14 @@ def explain(got, want, func: str = "") -> str:
             return "NaN or infinite values: a division by zero or a square root of a negative number?"
         scale = float(np.abs(w).max(initial=0.0)) or 1.0
         err = float(np.abs(g - w).max(initial=0.0)) / scale
-        if err == 0.0:
+        if err <= PRECISION_RTOL:
             continue
-        if err < 1e-5:
+        whole = relative_error(gp, wp)  # the float32 hint only when the whole answer is off by float32's scale
+        if whole is not None and float32_sized(whole):
             if dtype == "float32" and np.shape(w) and str(np.asarray(w).dtype) != "float32":
                 return ("a float32 answer, right to about 7 significant digits only: compute and return float64 "
                         "(no .astype(float32) anywhere)")
-            return (f"right to about {max(1, int(-np.log10(err)))} significant digits only: float32 arithmetic, "
+            return (f"right to about {max(1, int(-np.log10(whole)))} significant digits only: float32 arithmetic, "
                     "a rounded constant or a loose iteration tolerance somewhere; compute in float64 to ~1e-12")
         if np.allclose(g, -w, rtol=1e-6, atol=1e-9 * scale):
             return "the right answer with the opposite sign"
@@ -326,7 +342,8 @@ def judge_unchanged(built: Built, run: CheckRun):
         if not c.ok:
             return 0.0, f"raised {c.error}"
         for k, a in enumerate(args[1]):
-            if isinstance(a, np.ndarray):
+            if isinstance(a, (np.ndarray, list)):  # a list of arrays (the homographies of Zhang's method) too
+                a = np.asarray(a)
                 after = c.args_after[k] if c.args_after and k < len(c.args_after) else None
                 if not isinstance(after, np.ndarray) or after.shape != a.shape or not np.array_equal(after, a):
                     return 0.0, f"the function changed its input argument {k + 1}; work on a copy"
@@ -337,21 +354,30 @@ def judge_dtype(built: Built, run: CheckRun):
     calls, why = _calls_or_failure(built, run)
     if calls is None:
         return 0.0, why
-    want = built.extra.get("dtype", "float64")
     for c, ref in zip(calls, built.refs):
         if not c.ok:
             return 0.0, f"raised {c.error}"
-        parts, refs = _arrays(c.value), (list(ref) if isinstance(ref, tuple) else [ref])
-        if parts is None or len(parts) != len(refs):
-            return 0.0, f"should return {len(refs)} numpy array(s), got {_describe_value(c.value)}"
-        for g, r in zip(parts, refs):
+        # the rule table's return-type rule, in the self-check's words (dtscal_lib.exercise_rules)
+        why = return_type_problem(built.func, c.value, c.note)
+        if why:
+            return 0.0, why
+        for g, r in zip(_arrays(c.value), (list(ref) if isinstance(ref, tuple) else [ref])):
             if g.shape != np.shape(r):
                 return 0.0, f"should return shape {np.shape(r)}, got {g.shape}"
-            if str(g.dtype) != want:
-                return 0.0, f"should return dtype {want}, got {g.dtype}"
-        if c.note:
-            return 0.0, f"should return a plain numpy array, got {c.note}"
     return 1.0, ""
+
+
+def judge_precision(built: Built, run: CheckRun):
+    """The precision contract (float64 inside) on the mistake catalogue's exact probes, judged by the function
+    the self-check uses (:func:`dtscal_lib.mistakes.precision_problem`)."""
+    calls, why = _calls_or_failure(built, run)
+    if calls is None:
+        return 0.0, why
+    bad = next((c for c in calls if not c.ok), None)
+    if bad is not None:
+        return 0.0, f"raised {bad.error}"
+    why = precision_problem(built.func, [a for _, a in built.calls], [c.value for c in calls])
+    return (0.0, why) if why else (1.0, "")
 
 
 def judge_raises(built: Built, run: CheckRun):
@@ -362,9 +388,8 @@ def judge_raises(built: Built, run: CheckRun):
         if c.ok:
             return 0.0, f"should raise ValueError (the input does not determine the answer), but returned " \
                         f"{_describe_value(c.value)}"
-        if not c.error.startswith("ValueError") or "math domain error" in c.error:
-            return 0.0, f"should raise ValueError saying what is wrong (check the number of views first), " \
-                        f"raised {c.error}"
+        if raises_problem(c.error):
+            return 0.0, raises_problem(c.error)
     return 1.0, ""
 
 
@@ -487,12 +512,12 @@ def judge_truth_pose(built: Built, run: CheckRun):
         f"times {num(tol['margin'])})")
 
 
-JUDGES = {"truth_H": judge_truth_H, "truth_K": judge_truth_K, "truth_pose": judge_truth_pose,
-          "close": judge_close, "unchanged": judge_unchanged, "dtype": judge_dtype, "raises": judge_raises,
-          "scaled": judge_scaled}
+JUDGES = {"precision": judge_precision, "truth_H": judge_truth_H, "truth_K": judge_truth_K,
+          "truth_pose": judge_truth_pose, "close": judge_close, "unchanged": judge_unchanged, "dtype": judge_dtype,
+          "raises": judge_raises, "scaled": judge_scaled}
 #: judges of form, not of values: they give points only to a function whose values are right on at
 #: least one case of a value check (code that computes nothing scores 0)
-FORM_JUDGES = ("unchanged", "dtype", "raises", "scaled")
+FORM_JUDGES = ("unchanged", "dtype", "raises", "scaled", "precision")
 
 
 # --------------------------------------------------------------------------- building a check
@@ -548,9 +573,11 @@ def build_check(func: str, spec: dict, reference: Callable, tolerances: dict | N
     ``reference`` is the solution notebook's function. Where the truth is known by
     construction, the solution must agree with it (else :class:`MaterialError`).
     """
+    spec = typed(func, spec)  # an unknown key (camer=, atl=) is refused, named
     judge_name = spec.get("judge", "close")
-    if judge_name not in JUDGES:
-        raise MaterialError(f"{func}: unknown judge {judge_name!r} in the grading material")
+    if judge_name == "precision":  # the catalogue's exact probes, judged as the self-check judges them
+        return Built(func, spec["name"], float(spec.get("weight", 1.0)), [(func, a) for a in probe_args(func)],
+                     [None] * len(probe_args(func)), judge_precision, {"about": spec["name"]}, form=True)
     rng = np.random.default_rng(int(spec["seed"]))
     args_list, truth = inputs_and_truth(func, spec, rng)
     refs = []

@@ -34,6 +34,35 @@ def add_parser(sub) -> None:
     sp.add_argument("--mem", type=int, default=MEM_MB, help=f"memory per submission, MB (default {MEM_MB})")
     sp.add_argument("-q", "--quiet", action="store_true", help="no table, no progress bar")
     sp.set_defaults(func=cmd_grade)
+    add_nbgrader_option(sub)
+
+
+def add_nbgrader_option(sub) -> None:
+    """``dtscal release --nbgrader COURSE``: the export lives in the grading wing (it carries the hidden cases),
+    so the grader adds the option to the teaching wing's ``release`` command (registered before it)."""
+    rp = getattr(sub, "choices", {}).get("release")
+    if rp is None:
+        return
+    rp.add_argument("--nbgrader", metavar="COURSE", help="write the course as an nbgrader course folder: "
+                    "COURSE/source/<notebook>/<notebook>.ipynb (solution, read-only and autograded test "
+                    "cells; the hidden cases in the tests' hidden part) and COURSE/nbgrader_config.py")
+    release = rp.get_default("func")
+    rp.set_defaults(func=lambda args: cmd_nbgrader(args) if getattr(args, "nbgrader", None) else release(args))
+
+
+def cmd_nbgrader(args) -> int:
+    from pathlib import Path
+
+    from ..paths import repo_root
+    from .nbgrader_export import export
+
+    root = Path(args.repo) if args.repo else repo_root()
+    for p in export(args.nbgrader, repo_root=root):
+        print(p)
+    print(f"nbgrader course in {args.nbgrader}: cd there, then `nbgrader generate_assignment 01_pinhole_projection`"
+          " (one assignment per notebook); autograding needs the kit installed where nbgrader runs",
+          file=sys.stderr)
+    return 0
 
 
 def cmd_grade(args) -> int:

@@ -7,7 +7,7 @@
 2. ``screen``: functions missing, still stubs, or calling a solving routine get 0 with the reason;
 3. ``run_own``: the other functions' checks and diagnosis probes run in the sandbox
    (:mod:`.sandbox`, one :class:`~.jobs.Job` per check), and are judged against the references
-   computed here (:mod:`.checks`); the mistake is named (:mod:`dtscal_lib.teaching.selfcheck.diagnosis`);
+   computed here (:mod:`.checks`); the mistake is named (:mod:`dtscal_lib.mistakes`, the catalogue both wings import);
 4. ``run_stand_ins``: one bug, one charge — a function whose callee lost points runs again with the
    grader's stand-in for that callee;
 5. ``score``: the better of the two runs per check; checks of form count only once a value is right;
@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from ..teaching.selfcheck import diagnosis
+from .. import mistakes as diagnosis
+from ..exercise_rules import charges, honesty_reason, module_reason
 from . import substitutes
 from .checks import Built
 from .errors import GRADER_ERROR
@@ -37,14 +38,16 @@ from .material import ASSIGNMENTS, Material
 from .sandbox import CPU_S, WALL_S, CheckRun, SandboxRun, run_calls, validate_limits
 
 NOT_IMPLEMENTED = "not implemented (the function still raises NotImplementedError)"
+#: a function using a module its notebook's rule table does not allow (:mod:`dtscal_lib.exercise_rules`)
+NOT_ALLOWED_STATUS = "not allowed"
 #: a function the grader could not run: its own status, not a score of the student's
 GRADER_ERROR_STATUS = "grader error"
 #: tries of a sandbox run that fails on the grader's side, and the pause before the second and third
 GRADER_ATTEMPTS = 3
 GRADER_RETRY_PAUSE_S = (1.0, 3.0)
 FORM_GATED = ("no points for form yet: none of this function's answers is right on any case, and checks of form "
-              "(dtype, shape, inputs untouched, raising, H[2, 2] = 1) count only once the values are right on at "
-              "least one case")
+              "(dtype, shape, inputs untouched, raising, H[2, 2] = 1, precision) count only once the values are "
+              "right on at least one case")
 
 
 @dataclass
@@ -170,8 +173,8 @@ class Grading:
     again: dict[str, list[str]] = field(default_factory=dict)
     #: (function, check index) -> {variant: verdict}
     judged: dict[tuple[str, int], dict[str, Verdict]] = field(default_factory=dict)
-    #: function -> solving routines its calls reached inside the sandbox
-    honesty: dict[str, set] = field(default_factory=dict)
+    #: (function, variant) -> solving routines its calls reached inside the sandbox
+    honesty: dict[tuple[str, str], set] = field(default_factory=dict)
     #: function -> its points with the student's own callees
     own_points: dict[str, OwnPoints] = field(default_factory=dict)
 
@@ -200,6 +203,8 @@ def read(g: Grading) -> None:
 def screen(g: Grading) -> None:
     """A function missing, still a stub or calling a solving routine: 0 on every check, with the reason."""
     sub = g.sub
+    # one call, one charge: a routine reached through another exercise function is charged to that function
+    found = charges(sub.functions, sub.aliases, g.assignment, ASSIGNMENTS[g.assignment])
     for func in ASSIGNMENTS[g.assignment]:
         fr = FunctionResult(func)
         g.res.functions.append(fr)
@@ -209,10 +214,12 @@ def screen(g: Grading) -> None:
             fr.status = "missing"
         elif func in sub.stubs:
             reason, fr.status = NOT_IMPLEMENTED, "not implemented"
-        elif func in sub.forbidden:
+        elif func in found.honesty:
             fr.status = "academic honesty"
-            reason = (f"no credit: {func} calls {', '.join(sub.forbidden[func])}, which does the exercise for you. "
-                      "Write the computation yourself (calling it from tests or plots is fine).")
+            reason = honesty_reason(func, found.honesty[func])
+        elif func in found.modules:
+            fr.status = NOT_ALLOWED_STATUS
+            reason = module_reason(func, found.modules[func], g.assignment)
         fr.tests = [TestResult(b.name, func, 0.0, b.weight, reason) for b in g.checks[func]]
         if not reason:
             callees = exercise_callees(sub, func, ASSIGNMENTS[g.assignment])
@@ -300,8 +307,11 @@ def explain(g: Grading) -> None:
     for fr in g.res.functions:
         if fr.status == GRADER_ERROR_STATUS:
             continue
-        if g.honesty.get(fr.name):  # caught at run time: a route the syntax check missed
-            names = ", ".join(sorted(g.honesty[fr.name]))
+        # caught at run time: a route the syntax check missed. A function run again with the grader's stand-ins
+        # is judged on that run only: with its own callees, the call may be the callee's (charged there)
+        used = g.honesty.get((fr.name, "stand-in" if fr.name in g.again else "own"))
+        if used:
+            names = ", ".join(sorted(used))
             fr.status = "academic honesty"
             why = (f"no credit: while it ran, {fr.name} called {names}, which does the exercise for you "
                    "(caught inside the sandbox). Write the computation yourself.")
@@ -397,7 +407,7 @@ def _judge(g: Grading, run: SandboxRun, plan: list[Planned]) -> None:
                     CheckRun(failure=cr.failure or "the check did not finish")
             used = sorted({h for c in one.calls for h in c.honesty})
             if used:
-                g.honesty.setdefault(fr.name, set()).update(used)
+                g.honesty.setdefault((fr.name, p.variant), set()).update(used)
             frac, msg = b.judge(b, one)
             msg = _cell_lines(g.sub, msg)
             frac = min(1.0, max(0.0, float(frac)))

@@ -242,8 +242,12 @@ class _Blobs:
 def _encode(value, blobs: _Blobs, np, depth: int = 0):
     """``value`` as a JSON-able description; its arrays go to ``blobs`` (plain .npy, no pickle)."""
     if isinstance(value, (tuple, list)) and depth == 0 and 1 <= len(value) <= 4 and \
-            any(isinstance(v, (np.ndarray, tuple, list)) for v in value):
-        return {"kind": "tuple", "items": [_encode(v, blobs, np, 1) for v in value]}
+            any(isinstance(v, (np.ndarray, tuple)) for v in value):  # several outputs (a nested list is one)
+        items = [_encode(v, blobs, np, 1) for v in value]
+        # the same words as dtscal_lib.exercise_rules.answer_note (the rule table's return-type rule)
+        note = "a list" if isinstance(value, list) else next(
+            (f"{it['note']} inside the tuple" for it in items if it.get("note")), "")
+        return {"kind": "tuple", "items": items, "note": note}
     note = ""
     if isinstance(value, np.ndarray):
         if type(value) is not np.ndarray:
@@ -353,7 +357,8 @@ def _work(job: SandboxJob, check: CheckJob, w: int, rule: _Rule, np) -> None:
             entry["honesty"] = list(rule.used)[:10]
         entry["stdout"] = cap.text()
         try:
-            entry["args_after"] = [_encode(a, blobs, np, 1) if isinstance(a, np.ndarray) else None for a in args]
+            entry["args_after"] = [_encode(a, blobs, np, 1) if isinstance(a, (np.ndarray, list)) else None
+                                  for a in args]
         except Exception:  # noqa: BLE001
             entry["args_after"] = None
         results.append(entry)

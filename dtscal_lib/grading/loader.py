@@ -22,20 +22,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import DtscalError
-
-#: OpenCV routines that solve an exercise (or most of one)
-CV2_DENY = frozenset({
-    "findHomography", "getPerspectiveTransform", "perspectiveTransform", "warpPerspective",
-    "calibrateCamera", "calibrateCameraExtended", "calibrateCameraRO", "initCameraMatrix2D", "projectPoints",
-    "undistortPoints", "undistortPointsIter", "undistortImagePoints", "initUndistortRectifyMap", "undistort",
-    "getOptimalNewCameraMatrix", "solvePnP", "solvePnPGeneric", "solvePnPRansac", "decomposeHomographyMat",
-    "convertPointsFromHomogeneous", "convertPointsToHomogeneous", "fisheye",
-})
-#: the kit's library ships with the student course and holds exercise computations
-#: (``camera``, ``calibration``, ``ground``, ``homography``, ``course``, ``boards``...): an exercise
-#: function may use none of it but these facts and errors
-KIT_ALLOWED = ("dtscal_lib.duckietown", "dtscal_lib.errors")
-
+from ..exercise_rules import (  # noqa: F401 - the rule table's analysis, as the grader's modules know it
+    CV2_DENY,
+    KIT_ALLOWED,
+    _called_names,
+    _record_aliases,
+    charges,
+    forbidden_calls,
+)
 
 #: imports of course plumbing (plots, widgets, the kit's checks) that exercise functions never
 #: need: skipped in the sandbox, which saves a second per submission
@@ -73,6 +67,8 @@ class Submission:
     functions: dict[str, ast.FunctionDef] = field(default_factory=dict)
     stubs: set[str] = field(default_factory=set)
     forbidden: dict[str, list[str]] = field(default_factory=dict)
+    #: local name -> dotted origin of the submission's top-level imports (``c`` -> ``cv2``)
+    aliases: dict[str, str] = field(default_factory=dict)
     dropped: int = 0
     syntax_errors: list[str] = field(default_factory=list)
     #: (code cell number, first line, last line) of each notebook code cell, in the numbering
@@ -209,84 +205,9 @@ def load_submission(path) -> Submission:
             else:
                 start = node.lineno
             sub.statements.append((seg, first + start - 1))
-    direct = {name: forbidden_calls(fn, aliases) for name, fn in sub.functions.items()}
-    for name, fn in sub.functions.items():  # through the submission's own helpers, at any depth
-        hits, seen, todo = set(direct[name]), {name}, [name]
-        while todo:
-            for callee in _called_names(sub.functions[todo.pop()]):
-                if callee in sub.functions and callee not in seen:
-                    seen.add(callee)
-                    todo.append(callee)
-                    hits.update(f"{h} (through {callee})" for h in direct[callee])
-        if hits:
-            sub.forbidden[name] = sorted(hits)
+    sub.aliases = aliases
+    sub.forbidden = charges(sub.functions, aliases).honesty
     return sub
-
-
-def _called_names(fn: ast.AST) -> set[str]:
-    return {n.id for n in ast.walk(fn) if isinstance(n, ast.Name)}
-
-
-def _record_aliases(node, aliases: dict) -> None:
-    if isinstance(node, ast.Import):
-        for a in node.names:
-            if a.asname:
-                aliases[a.asname] = a.name
-            else:
-                aliases[a.name.split(".")[0]] = a.name.split(".")[0]
-    else:
-        mod = node.module or ""
-        for a in node.names:
-            aliases[a.asname or a.name] = f"{mod}.{a.name}" if mod else a.name
-
-
-def _dotted(node, aliases: dict) -> str | None:
-    """``cv2.findHomography`` for ``c.findHomography`` when ``import cv2 as c``; None if not a name chain."""
-    parts = []
-    while isinstance(node, ast.Attribute):
-        parts.append(node.attr)
-        node = node.value
-    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "__import__" \
-            and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str):
-        base = node.args[0].value
-    elif isinstance(node, ast.Name):
-        base = aliases.get(node.id, node.id)
-    else:
-        return None
-    return ".".join([base, *reversed(parts)])
-
-
-def _denied(name: str | None) -> bool:
-    if not name:
-        return False
-    parts = name.split(".")
-    if parts[0] == "cv2":
-        return len(parts) > 1 and parts[1] in CV2_DENY
-    if parts[0] == "dtscal_lib" and len(parts) > 1:
-        return not any(name == m or name.startswith(m + ".") for m in KIT_ALLOWED)
-    return False
-
-
-def forbidden_calls(fn: ast.AST, aliases: dict) -> list[str]:
-    """Names of solving routines that ``fn`` uses (calls, or takes via getattr), sorted."""
-    local = dict(aliases)
-    for node in ast.walk(fn):  # imports inside the function count too
-        if isinstance(node, (ast.Import, ast.ImportFrom)):
-            _record_aliases(node, local)
-    hits = set()
-    for node in ast.walk(fn):
-        if isinstance(node, (ast.Attribute, ast.Name)):
-            name = _dotted(node, local)
-            if name and _denied(name) and name.count(".") >= 1:
-                hits.add(name)
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "getattr" \
-                and len(node.args) >= 2 and isinstance(node.args[1], ast.Constant) \
-                and isinstance(node.args[1].value, str):
-            base = _dotted(node.args[0], local)
-            if base and _denied(f"{base}.{node.args[1].value}"):
-                hits.add(f"{base}.{node.args[1].value}")
-    # keep the most specific names only (cv2.findHomography, not also cv2)
-    return sorted(h for h in hits if not any(o != h and o.startswith(h + ".") for o in hits))
 
 
 def useful_import(src: str) -> str | None:

@@ -13,19 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import DtscalError
+from ..exercise_rules import NOTEBOOKS
 from .checks import Built, MaterialError, build_check
 from .loader import load_submission, useful_import
 from .metrics import load as load_tolerances
+from .specs import SpecError, typed
 
 #: the exercise notebooks and the functions each one grades
-ASSIGNMENTS: dict[str, tuple[str, ...]] = {
-    "01_pinhole_projection": ("project_points",),
-    "02_homography": ("apply_homography", "estimate_homography"),
-    "03_intrinsic_calibration": ("intrinsic_constraints", "intrinsics_from_homographies",
-                                 "extrinsics_from_homography"),
-    "04_distortion_rectification": ("distort_normalized", "undistort_normalized", "rectification_maps"),
-    "05_extrinsic_calibration": ("board_ground_points", "pixel_to_ground", "camera_height_pitch"),
-}
+ASSIGNMENTS: dict[str, tuple[str, ...]] = {nb: rules.functions for nb, rules in NOTEBOOKS.items()}
 
 
 def assignment_of(name: str) -> str | None:
@@ -100,6 +95,11 @@ class Material:
             for f in funcs:
                 if not specs.get(f):
                     raise MaterialError(f"grading/cases.py has no checks for {f} ({a})")
+                for spec in specs[f] if isinstance(specs[f], list) else [specs[f]]:
+                    try:  # every check through its kind's dataclass: an unknown key is named here
+                        typed(f, spec)
+                    except SpecError as exc:
+                        raise MaterialError(str(exc)) from None
         try:
             tolerances = load_tolerances(root)
         except ValueError as exc:

@@ -35,7 +35,7 @@ def text(res: GradeResult) -> str:
     lines += [f"  note: {n}" for n in res.notes]
     for f in res.functions:
         lines.append(f"  {f.name}: {f.score:g} / {f.max_score:g}" + (f"  [{f.status}]" if f.status != "graded" else ""))
-        if f.status in ("not implemented", "missing", "academic honesty", GRADER_ERROR_STATUS):
+        if f.status in ("not implemented", "missing", "academic honesty", "not allowed", GRADER_ERROR_STATUS):
             lines.append(f"      {f.tests[0].output}")
             continue
         if f.diagnosis:

@@ -213,7 +213,8 @@ class _Decoder:
         kind = desc.get("kind")
         if kind == "tuple" and depth == 0:
             items = desc.get("items")
-            return (tuple(self.value(d, 1)[0] for d in items[:4]) if isinstance(items, list) else None), ""
+            return ((tuple(self.value(d, 1)[0] for d in items[:4]) if isinstance(items, list) else None),
+                    str(desc.get("note", ""))[:120])
         if kind == "object":
             return _Opaque(str(desc.get("type", "?"))[:60]), ""
         if kind == "array":

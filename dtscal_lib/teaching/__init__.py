@@ -9,5 +9,6 @@
 
 The rule: the calibration library (everything in ``dtscal_lib`` outside ``teaching/`` and ``grading/``) never
 imports this package; ``tests/test_import_cycles.py`` checks it. The teaching layer builds on the library, and
-the grader names mistakes with :mod:`~dtscal_lib.teaching.selfcheck.diagnosis`.
+neither it nor the grader (``grading/``) imports the other: both name mistakes with the catalogue
+:mod:`dtscal_lib.mistakes` and read the exercises' rules from :mod:`dtscal_lib.exercise_rules`.
 """

@@ -1,7 +1,8 @@
 """``dtscal course``, ``handin``, ``release`` and ``handout``: the teaching layer's commands.
 
 Registered on the ``dtscal`` parser by :mod:`dtscal_lib.cli`, as :mod:`dtscal_lib.grading.command` registers
-``grade``; the calibration commands stay in ``cli.py``.
+``grade`` (and ``release --nbgrader``, the nbgrader export, which holds the hidden cases); the calibration
+commands stay in ``cli.py``.
 """
 
 from __future__ import annotations
@@ -19,10 +20,6 @@ def add_parsers(sub) -> None:
         sp = sub.add_parser(name, help="write the student hand-out into OUT; --check compares notebooks/ "
                                        "with solutions/")
         release_args(sp)
-        if name == "release":
-            sp.add_argument("--nbgrader", metavar="COURSE", help="write the course as an nbgrader course folder: "
-                            "COURSE/source/<notebook>/<notebook>.ipynb (solution, read-only and autograded test "
-                            "cells; the hidden cases in the tests' hidden part) and COURSE/nbgrader_config.py")
 
     sp = sub.add_parser("course",
                         help="open the course in JupyterLab (a student's workspace; --instructor: solutions/)")
@@ -48,15 +45,6 @@ def cmd_release(args) -> int:
     from . import release
 
     root = Path(args.repo) if args.repo else repo_root()
-    if getattr(args, "nbgrader", None):
-        from .nbgrader_export import export
-
-        for p in export(args.nbgrader, repo_root=root):
-            print(p)
-        print(f"nbgrader course in {args.nbgrader}: cd there, then `nbgrader generate_assignment 01_pinhole_projection`"
-              " (one assignment per notebook); autograding needs the kit installed where nbgrader runs",
-              file=sys.stderr)
-        return 0
     if args.check:
         diffs = release.check_notebooks(root / "solutions", root / "notebooks")
         if diffs:

@@ -12,6 +12,9 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ...exercise_rules import RETURNS, live_charges, return_type_problem
+from ...mistakes import FUNCTIONS, diagnose_function, precision_problem, probe_args
+
 PASS, FAIL, NOT_IMPLEMENTED = "pass", "fail", "not implemented yet"
 
 
@@ -80,6 +83,10 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
     errors never escape the check and the notebook runs on.
     """
     report = Report(name)
+    refused = _refused(name, fn)
+    if refused:  # the grader gives no credit for this function: the same words, no case run
+        report.results = [CaseResult(RULES_TITLE, FAIL, refused)]
+        cases = []
     for case in cases:
         try:
             case.run(fn)
@@ -94,9 +101,9 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
             report.results.append(CaseResult(case.title, FAIL, f"{type(exc).__name__}: {exc}{where}", case.hint))
         else:
             report.results.append(CaseResult(case.title, PASS))
-    if report.status == FAIL:
-        from .diagnosis import FUNCTIONS, diagnose_function
-
+    if report.status == PASS and name in RETURNS:  # the rule table's contract, on the catalogue's probes
+        report.results += _contract(name, fn)
+    if report.status == FAIL and not refused:
         if name in FUNCTIONS:
             mistake = diagnose_function(name, fn)
             report.diagnosis = mistake.line() if mistake else ""
@@ -105,6 +112,38 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
     if strict() and not report.passed:
         raise SelfCheckFailed(report.text())
     return report
+
+
+#: the title of the case that states a broken rule of the notebook's rule table
+RULES_TITLE = "the rules of this notebook's exercises (imports, academic honesty)"
+
+
+def _refused(name: str, fn: Callable) -> str:
+    """Why the grader refuses ``fn`` outright (a solving routine, a module the notebook does not allow), in the
+    grader's words, or ""."""
+    if name not in RETURNS:
+        return ""
+    honesty, modules = live_charges(name, fn)
+    return honesty or modules
+
+
+def _contract(name: str, fn: Callable) -> list[CaseResult]:
+    """The return type and the precision contract on the mistake catalogue's probes, judged by the functions the
+    grader uses; a failing rule is listed, a kept one adds nothing to the report."""
+    args_list, outputs = probe_args(name), []
+    for args in args_list:
+        try:
+            outputs.append(fn(*args))
+        except Exception as exc:  # noqa: BLE001 - student code may raise anything
+            return [CaseResult("the public probes of the rule table", FAIL, f"{type(exc).__name__}: {exc}")]
+    out = []
+    why = return_type_problem(name, outputs[0])
+    if why:
+        out.append(CaseResult("returns numpy arrays (the notebook's return types)", FAIL, why))
+    why = precision_problem(name, args_list, outputs)
+    if why:
+        out.append(CaseResult("computed in float64 (the precision contract)", FAIL, why))
+    return out
 
 
 class SelfCheckFailed(AssertionError):

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from ... import duckietown as dt
+from ...mistakes import robot_ground_homography  # a camera placed by hand: the truth by construction
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, nums, run_check
 
 __all__ = ["check_board_ground_points", "check_pixel_to_ground", "check_camera_height_pitch"]
@@ -106,8 +107,6 @@ def check_pixel_to_ground(fn: Callable) -> Report:
 # --------------------------------------------------------------------------- camera_height_pitch
 def _case_robot(height, pitch, yaw, x, scale, title, hint) -> Case:
     def run(fn):
-        from .diagnosis import robot_ground_homography  # a camera placed by hand: the truth by construction
-
         K = dt.default_P()[:, :3]
         H = robot_ground_homography(K, height, pitch, yaw_deg=yaw, x=x) * scale
         got = expect_shape(fn(H.copy(), K.copy()), (2,), "camera_height_pitch(H, K)")
@@ -126,6 +125,7 @@ def check_camera_height_pitch(fn: Callable) -> Report:
         _case_robot(0.2, 40.0, -3.0, 0.0, -7.5, "a higher, steeper camera; H times -7.5 (any scale and sign)", hint=(
             "H is defined up to scale and sign: fix lambda's sign so that a ground point ahead of the robot, "
             "e.g. (0.3, 0), is in front of the camera (positive depth)")),
-        _case_robot(0.06, 8.0, 0.0, 0.1, 1.0, "a low camera looking almost straight ahead", hint=(
-            "return np.array([height_in_metres, pitch_in_degrees]) (float64, shape (2,))")),
+        _case_robot(0.06, -4.0, 0.0, 0.1, 1.0, "a low camera looking almost straight ahead", hint=(
+            "return np.array([height_in_metres, pitch_in_degrees]) (float64, shape (2,)); this camera looks 4 deg UP: "
+            "the pitch below the horizon is negative (no abs())")),
     ])

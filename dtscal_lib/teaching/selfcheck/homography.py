@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from ...boards import DUCKIETOWN_BOARD
+from ...mistakes import raw_dlt
 from ...poses import board_homography, random_board_pose
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, num, run_check
 from .projection import K_DUCKIE
@@ -111,16 +112,6 @@ def _noisy_case(rng, n: int, sigma: float, offset: float = 0.0, span: float = 1.
     H_true /= H_true[2, 2]
     dst = _opencv_apply(H_true, src) + rng.normal(0.0, sigma, size=(n, 2))
     return src, dst, H_true
-
-
-def raw_dlt(src, dst) -> np.ndarray:
-    """The DLT without normalization (to recognise it, not to solve the exercise)."""
-    rows = []
-    for (x, y), (u, v) in zip(src, dst):
-        rows.append([x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u])
-        rows.append([0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v])
-    h = np.linalg.svd(np.asarray(rows))[2][-1].reshape(3, 3)
-    return h / h[2, 2]
 
 
 def _evidence(H, src, dst) -> str:

@@ -17,6 +17,7 @@ import numpy as np
 
 from ...boards import DUCKIETOWN_BOARD
 from ...camera import intrinsic_matrix
+from ...mistakes import K_PROBE
 from ...poses import points_on_rays, random_board_pose
 from .core import Case, CheckFailed, Report, expect_close, expect_shape, run_check
 
@@ -25,7 +26,7 @@ __all__ = ["check_project_points", "K_DUCKIE", "K_SKEWED"]
 #: a Duckiebot-like camera (fx, fy, cx, cy near the shipped default.yaml)
 K_DUCKIE = intrinsic_matrix(307.7, 315.0, 329.7, 244.5)
 #: the same with a visible skew: catches code that ignores K[0, 1]
-K_SKEWED = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=6.0)
+K_SKEWED = K_PROBE
 
 
 # --------------------------------------------------------------------------- the check

@@ -30,7 +30,7 @@ from pathlib import Path
 import nbformat
 
 from ..errors import DtscalError
-from .release import (BEGIN, END, EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG, _read, _solution_paths, _tags,
+from ..notebook_format import (BEGIN, END, EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG, _read, _solution_paths, _tags,
                       _validate_cells, find_regions)
 
 BEGIN_HIDDEN, END_HIDDEN = "### BEGIN HIDDEN TESTS", "### END HIDDEN TESTS"
@@ -73,7 +73,7 @@ def _literal(value, what: str) -> str:
 
 def test_cell_source(assignment: str, function: str, *, points: float, cases: dict, tolerances: dict,
                      reference: str) -> str:
-    from ..grading.nbgrader_cell import MARK
+    from .nbgrader_cell import MARK
 
     return "\n".join([
         f"{MARK}: {function} ({points:g} points)",
@@ -156,7 +156,7 @@ def source_notebook(nb, assignment: str, *, functions: tuple[str, ...], checks: 
 def export(out_dir, repo_root=None) -> list[Path]:
     """Write the nbgrader course into ``out_dir``; the notebooks written."""
     try:
-        from ..grading.material import ASSIGNMENTS, Material
+        from .material import ASSIGNMENTS, Material
     except ImportError:  # a student's hand-out has no grader
         raise DtscalError("the nbgrader export runs in the instructor's kit (it needs grading/ and solutions/); "
                           "this copy of the kit has no grader") from None

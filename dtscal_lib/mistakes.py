@@ -1,4 +1,7 @@
-"""Name the mistake: how a wrong answer differs from the right one.
+"""The mistake catalogue (probes, mistakes, equations): how a wrong answer differs from the right one.
+
+Both wings import it: the self-checks (``dtscal_lib.teaching.selfcheck``) and the grader
+(``dtscal_lib.grading``); it imports neither.
 
 A student's function is run on a few public *probe* inputs. Its answers are compared with
 the answers of *mistake models*: small, deliberately wrong versions of each exercise
@@ -27,14 +30,13 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from ... import duckietown as dt
-from ...boards import Board, ground_points
-from ...camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
-from ...camera import undistort_normalized as _newton_undistort
-from ...homography import apply_homography
-from ...poses import board_homography, random_board_pose
-from .homography import raw_dlt as _raw_dlt  # the mistake model for "no normalization"
-from .projection import K_SKEWED
+from . import duckietown as dt
+from .boards import Board, ground_points
+from .exercise_rules import PRECISION_RTOL, float32_sized, relative_error
+from .camera import intrinsic_matrix, new_camera_matrix, normalized_to_pixel
+from .camera import undistort_normalized as _newton_undistort
+from .homography import apply_homography
+from .poses import board_homography, random_board_pose
 
 __all__ = ["Mistake", "diagnose", "diagnose_function", "probe_args", "MISTAKES", "FUNCTIONS"]
 
@@ -53,8 +55,19 @@ class Mistake:
 
 
 # --------------------------------------------------------------------------- probe inputs
-#: the camera of the probes: the self-checks' skewed camera
-K_PROBE = K_SKEWED
+#: the camera of the probes: the self-checks' skewed camera (``selfcheck.projection.K_SKEWED``)
+K_PROBE = intrinsic_matrix(312.0, 318.0, 327.0, 241.0, skew=6.0)
+
+
+def raw_dlt(src, dst) -> np.ndarray:
+    """The DLT without normalization (the mistake model for "no normalization"; to recognise it, not to solve
+    the exercise)."""
+    rows = []
+    for (x, y), (u, v) in zip(src, dst):
+        rows.append([x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u])
+        rows.append([0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v])
+    h = np.linalg.svd(np.asarray(rows))[2][-1].reshape(3, 3)
+    return h / h[2, 2]
 
 
 def _pose(seed: int, distance: float = 0.6):
@@ -134,7 +147,9 @@ def _probes(func: str) -> tuple:
     if func == "camera_height_pitch":
         K = dt.default_P()[:, :3]
         return ((robot_ground_homography(K, 0.104, 18.0, yaw_deg=0.8) * 3.0, K),
-                (robot_ground_homography(K, 0.15, 31.0, yaw_deg=-2.0, x=0.03) * -0.5, K))
+                (robot_ground_homography(K, 0.15, 31.0, yaw_deg=-2.0, x=0.03) * -0.5, K),
+                # pitched UP (a negative pitch below the horizon): shows abs() on the pitch
+                (robot_ground_homography(K, 0.12, -9.0, yaw_deg=1.5, x=0.05) * 1.7, K))
     raise KeyError(func)
 
 
@@ -335,7 +350,7 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
         (_M("no_normalization", "no normalization: without Hartley's normalization the DLT's answer depends on "
             "where the origin is and what unit the points use, and it loses precision far from the origin; centre "
             "and scale both point sets first", EQ36),
-         lambda s, d: _raw_dlt(s, d)),
+         lambda s, d: raw_dlt(s, d)),
     ]),
     "intrinsic_constraints": (_constraints, [
         (_M("rows_not_columns", "v_ij built from the rows of H: h1 and h2 are the COLUMNS H[:, 0], H[:, 1]",
@@ -405,7 +420,7 @@ MISTAKES: dict[str, tuple[Callable, list[tuple[Mistake, Callable | None]]]] = {
     ]),
 }
 def _height_pitch(H, K) -> np.ndarray:
-    from ...ground import camera_pose_from_homography
+    from .ground import camera_pose_from_homography
 
     pose = camera_pose_from_homography(np.asarray(H, float), np.asarray(K, float))
     return np.array([pose["height_m"], pose["pitch_down_deg"]])
@@ -427,7 +442,57 @@ MISTAKES["camera_height_pitch"] = (_height_pitch, [
     (_M("height_from_t", "the height read from t: t is the robot's origin seen from the camera; the camera centre "
         "in the robot frame is C = -R^T t", EQ_GROUND),
      lambda H, K: _height_pitch_t(H, K)),
+    # the mistakes below are derived from the equations, one step of the pipeline each: M = K^-1 H^-1 =
+    # lambda [r1 r2 t], lambda = 1 / |M[:, 0]| (sign: a ground point ahead is in front of the camera),
+    # R = [r1 r2 r1 x r2] made orthonormal, C = -R^T t, height = C_z, pitch = asin(-R[2, 2]) in degrees
+    (_M("K_inverse_forgotten", "K^-1 forgotten: H^-1 = lambda K [r1 r2 t], so [r1 r2 t] = K^-1 H^-1 / lambda; "
+        "without K^-1 the columns are in pixels, not a rotation", EQ_GROUND),
+     lambda H, K: _hp(np.linalg.inv(np.asarray(H, float)))),
+    (_M("K_transposed", "K transposed: solve with K itself (M = K^-1 H^-1 = np.linalg.solve(K, H^-1)), not K^T",
+        EQ_GROUND), lambda H, K: _hp(np.linalg.solve(np.asarray(K, float).T, np.linalg.inv(np.asarray(H, float))))),
+    (_M("t_wrong_column", "t from the wrong column: [r1 r2 t] = lambda M, so t = lambda M[:, 2] (the third "
+        "column), r1 and r2 are the first two", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), t_col=0)),
+    (_M("t_wrong_column", "t from the wrong column: [r1 r2 t] = lambda M, so t = lambda M[:, 2] (the third "
+        "column), r1 and r2 are the first two", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), t_col=1)),
+    (_M("lambda_from_t", "lambda from t: r1 is a unit vector, t is not, so lambda = 1 / |M[:, 0]| (or the mean of "
+        "|M[:, 0]| and |M[:, 1]|), never 1 / |M[:, 2]|", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), lam_col=2)),
+    (_M("height_in_mm", "the height in millimetres: the ground homography is in metres, return metres", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [1000.0, 1.0]),
+    (_M("height_in_cm", "the height in centimetres: the ground homography is in metres, return metres", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [100.0, 1.0]),
+    (_M("height_is_t_z", "t_z used as the height: t is the robot's origin in CAMERA coordinates (its depth); the "
+        "height is the z of the camera centre C = -R^T t in the robot frame", EQ_GROUND),
+     lambda H, K: _hp(_M_of(H, K), height="t_z")),
+    (_M("height_is_C_x", "C_x used as the height: the robot frame's z axis points up, so the height is C[2] "
+        "(C[0] is how far ahead of the axle the camera sits)", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), height="C_x")),
+    (_M("C_is_minus_R_t", "C = -R t: the camera centre is C = -R^T t (R maps robot to camera coordinates, its "
+        "transpose maps back)", EQ_GROUND), lambda H, K: _hp(_M_of(H, K), height="Rt")),
+    (_M("pitch_from_vertical", "the pitch measured from the vertical: it is the angle BELOW THE HORIZON, "
+        "asin(-R[2, 2]) = 90 deg minus the angle from the vertical", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K) * [1.0, -1.0] + [0.0, 90.0]),
+    (_M("outputs_swapped", "the two outputs are swapped: return [height in metres, pitch in degrees]", EQ_GROUND),
+     lambda H, K: _height_pitch(H, K)[::-1]),
+    (_M("abs_pitch", "abs() on the pitch: a camera pitched UP has a negative pitch below the horizon; keep the "
+        "sign of asin(-R[2, 2])", EQ_GROUND), lambda H, K: np.abs(_height_pitch(H, K))),
 ])
+
+
+def _M_of(H, K) -> np.ndarray:
+    """M = K^-1 H^-1 = lambda [r1 r2 t]."""
+    return np.linalg.solve(np.asarray(K, float), np.linalg.inv(np.asarray(H, float)))
+
+
+def _hp(M: np.ndarray, *, lam_col: int = 0, t_col: int = 2, height: str = "C_z") -> np.ndarray:
+    """[height, pitch] by the pipeline of the hint (lambda from the first column, sign from a ground point 0.3 m
+    ahead, R made orthonormal, C = -R^T t), with one step as a mistake names it."""
+    lam = 1.0 / np.linalg.norm(M[:, lam_col])
+    r1, r2, t = lam * M[:, 0], lam * M[:, 1], lam * M[:, t_col]
+    if (0.3 * r1 + lam * M[:, 2])[2] < 0:
+        r1, r2, t = -r1, -r2, -t
+    U, _, Wt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    R = U @ Wt
+    h = {"C_z": (-R.T @ t)[2], "C_x": (-R.T @ t)[0], "t_z": t[2], "Rt": (-R @ t)[2]}[height]
+    return np.array([float(h), float(np.degrees(np.arcsin(np.clip(-R[2, 2], -1, 1))))])
 
 
 def _rt_of(M: np.ndarray, first: bool = False):
@@ -626,3 +691,50 @@ def diagnose_function(func: str, fn: Callable) -> Mistake | None:
         except Exception as exc:  # a raising probe gives no diagnosis
             outputs.append(exc)
     return diagnose(func, args_list, outputs)
+
+
+# --------------------------------------------------------------------------- the precision contract
+#: the probes of each function whose right answer is exact (the noisy ones determine no exact answer)
+_EXACT_PROBES = {"estimate_homography": (0,), "extrinsics_from_homography": (0,)}
+#: the maps are float32 by contract (judged to 0.01 px): no precision probe
+NO_PRECISION = ("rectification_maps",)
+
+
+def right_answers(func: str, args_list: list[tuple]) -> list:
+    """The exact answer of each probe (None for a noisy probe)."""
+    exact = _EXACT_PROBES.get(func, range(len(args_list)))
+    out = []
+    for i, args in enumerate(args_list):
+        if i not in exact:
+            out.append(None)
+        elif func == "extrinsics_from_homography":
+            out.append(_PROBE_POSE())
+        elif func == "intrinsics_from_homographies":
+            out.append(K_PROBE)
+        elif func == "estimate_homography":  # the probe's true H (an exact fit reproduces it)
+            H = _views(K_PROBE, 1, 903)[0][0]
+            out.append(H / H[2, 2])
+        elif func == "undistort_normalized":
+            out.append(_newton_undistort(np.asarray(args[0], float), args[1]))
+        else:
+            out.append(MISTAKES[func][0](*args))
+    return out
+
+
+def precision_problem(func: str, args_list: list[tuple], outputs: list) -> str:
+    """The precision contract (float64 inside), judged the same way by the self-check and the grader: "" when
+    every exact probe's answer is within :data:`PRECISION_RTOL` of the right one, else what is wrong. A wrong
+    answer (not a float32-sized difference) is left to the value checks: "" too."""
+    if func in NO_PRECISION:
+        return ""
+    for out, want in zip(outputs, right_answers(func, args_list)):
+        if want is None or isinstance(out, BaseException):
+            continue
+        got, wants = _as_arrays(out), _as_arrays(want)
+        err = relative_error(got, wants) if got is not None and len(got) == len(wants) else None
+        if err is not None and float32_sized(err):
+            return (f"right to a relative {err:.1g} only, where float64 gives {PRECISION_RTOL:g} or better: "
+                    "float32 arithmetic (or a rounded constant, or a loose iteration tolerance) somewhere; "
+                    "compute in float64 throughout")
+    return ""
+
