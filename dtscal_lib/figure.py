@@ -5,10 +5,16 @@ Used by the library's report (:mod:`dtscal_lib.report`) and by the teaching laye
 
 Every course figure is a :class:`CourseFigure` made by :func:`new_figure`: no pyplot, no
 global ``rcParams``, no ``plt.show()``. A notebook shows a figure by leaving it as the cell's
-last value; it is stored as a small PNG (:data:`DPI`, :data:`PHOTO_DPI`) so notebooks stay
-small. Its text form (``text/plain``, what a screen reader, a static page or a diff shows instead of the picture)
-is an alt text: a sentence saying what the figure shows (:attr:`CourseFigure.alt`, set by the function that draws
-it), followed by each panel's title and axes. It is the same on every machine.
+last value (or passing it to ``display``); it is stored as a small PNG (:data:`DPI`, :data:`PHOTO_DPI`) so
+notebooks stay small. Its alt text is a sentence saying what the figure shows (:attr:`CourseFigure.alt`, set by the
+function that draws it), followed by each panel's title and axes (:func:`describe`); it is the same on every machine.
+
+The figure is displayed as ``text/html``, an ``<img>`` whose ``alt`` attribute is that text, and as ``text/plain``
+(the same text, for a terminal or a diff). Neither JupyterLab (4.x: its PNG renderer, ``renderImage`` in
+``@jupyterlab/rendermime``, sets no ``alt``) nor nbconvert's default ``lab`` HTML template (its ``data_png`` block
+writes no ``alt``; the ``classic`` one reads ``output.metadata['image/png']['alt']`` and otherwise writes "No
+description has been provided for this image") can put an alt text on an ``image/png`` output; both prefer
+``text/html`` to ``image/png`` and keep its ``alt``.
 
 Colours come from :data:`PALETTE`, Okabe and Ito's colour-blind-safe set (Okabe & Ito, *Color Universal Design*,
 2008, https://jfly.uni-koeln.de/color/): no red/green pair, distinguishable under deuteranopia and protanopia
@@ -17,6 +23,8 @@ Colours come from :data:`PALETTE`, Okabe and Ito's colour-blind-safe set (Okabe 
 
 from __future__ import annotations
 
+import base64
+import html
 import io
 from typing import Sequence
 
@@ -28,7 +36,8 @@ from matplotlib.figure import Figure
 from .boards import DUCKIETOWN_BOARD, Board
 from .duckietown import IMAGE_SIZE
 
-__all__ = ["CourseFigure", "new_figure", "image_axes", "draw_board", "show_image", "show_images", "png_bytes", "DPI",
+__all__ = ["CourseFigure", "new_figure", "figure_html", "bgr", "GREY", "GOOD_COLOR", "BAD_COLOR", "WARN_COLOR",
+           "image_axes", "draw_board", "show_image", "show_images", "png_bytes", "DPI",
            "PHOTO_DPI", "BOARD_COLOR", "TRUTH_COLOR", "OTHER_COLOR", "ARROW_COLOR", "PALETTE", "describe"]
 
 #: resolution of plots (dots per inch)
@@ -41,6 +50,10 @@ PALETTE = {"orange": "#E69F00", "sky blue": "#56B4E9", "bluish green": "#009E73"
 #: what the course figures draw: the board, the truth or an ideal grid, a second estimate, residual arrows
 BOARD_COLOR, TRUTH_COLOR, OTHER_COLOR = PALETTE["orange"], PALETTE["blue"], PALETTE["reddish purple"]
 ARROW_COLOR = PALETTE["vermillion"]
+#: a verdict's colours (good, doubtful, bad): bluish green, orange and vermillion, never a red/green pair
+GOOD_COLOR, WARN_COLOR, BAD_COLOR = PALETTE["bluish green"], PALETTE["orange"], PALETTE["vermillion"]
+#: the neutral greys the kit draws with besides black and white (axes, guides, backgrounds, muted text)
+GREY = {"dark": "#333333", "mid": "#808080", "light": "#BFBFBF", "pale": "#EBEBEB"}
 _FONT = {"font.size": 9, "axes.titlesize": 10}
 
 
@@ -53,8 +66,9 @@ class CourseFigure(Figure):
 
     alt: str = ""
 
-    def _repr_png_(self) -> bytes:
-        return png_bytes(self)
+    def _repr_mimebundle_(self, include=None, exclude=None) -> dict:
+        """What a notebook stores and shows: the PNG in an ``<img>`` with its alt text, and the alt text alone."""
+        return {"text/html": figure_html(self), "text/plain": describe(self)}
 
     def __repr__(self) -> str:  # text/plain in a notebook: the alt text, never "<CourseFigure size ...>"
         return describe(self)
@@ -84,6 +98,26 @@ def describe(fig: Figure) -> str:
         return alt
     head = "Panel" if len(panels) == 1 else f"{len(panels)} panels"
     return f"{alt} {head}: " + "; ".join(panels) + "."
+
+
+def figure_html(fig: Figure) -> str:
+    """The figure as an HTML ``<img>``: the PNG inline, its alt text (:func:`describe`) in ``alt``.
+
+    >>> fig = new_figure(1.0, 1.0); fig.alt = 'A "quoted" figure.'
+    >>> figure_html(fig)[:32], figure_html(fig).split('alt=')[1]
+    ('<img src="data:image/png;base64,', '"A &quot;quoted&quot; figure."/>')
+    """
+    data = base64.b64encode(png_bytes(fig)).decode("ascii")
+    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(describe(fig), quote=True)}"/>'
+
+
+def bgr(colour: str) -> tuple[int, int, int]:
+    """A ``#RRGGBB`` colour as OpenCV's (blue, green, red) tuple, for drawing on frames with ``cv2``.
+
+    >>> bgr(PALETTE["vermillion"])
+    (0, 94, 213)
+    """
+    return int(colour[5:7], 16), int(colour[3:5], 16), int(colour[1:3], 16)
 
 
 def png_bytes(fig: Figure, dpi: float | None = None) -> bytes:
