@@ -36,14 +36,19 @@ from matplotlib.figure import Figure
 from .boards import DUCKIETOWN_BOARD, Board
 from .duckietown import IMAGE_SIZE
 
-__all__ = ["CourseFigure", "new_figure", "figure_html", "bgr", "GREY", "GOOD_COLOR", "BAD_COLOR", "WARN_COLOR",
-           "image_axes", "draw_board", "show_image", "show_images", "png_bytes", "DPI",
-           "PHOTO_DPI", "BOARD_COLOR", "TRUTH_COLOR", "OTHER_COLOR", "ARROW_COLOR", "PALETTE", "describe"]
+__all__ = ["CourseFigure", "new_figure", "figure_html", "describe", "png_bytes", "image_axes", "draw_board",
+           "show_image", "show_images", "bgr", "DPI", "PHOTO_DPI", "PHOTO_MIN_PX", "PHOTO_PANEL_IN", "PALETTE", "GREY",
+           "BOARD_COLOR", "TRUTH_COLOR", "OTHER_COLOR", "ARROW_COLOR", "GOOD_COLOR", "WARN_COLOR", "BAD_COLOR"]
 
 #: resolution of plots (dots per inch)
 DPI = 80
 #: camera frames compress poorly as PNG: a lower resolution keeps notebooks small
 PHOTO_DPI = 70
+#: the narrowest a camera frame is drawn (px): a 640 px frame shown smaller than about half its size hides the
+#: detail the text points at (corners, bent lines, labels); ``tests/test_figure_palette.py`` measures every panel
+PHOTO_MIN_PX = 300
+#: inches per photo panel that give PHOTO_MIN_PX at PHOTO_DPI once a title and the layout's pads are taken off
+PHOTO_PANEL_IN = 4.8
 #: Okabe-Ito's colour-blind-safe palette (black left out: the kit draws marks in black separately)
 PALETTE = {"orange": "#E69F00", "sky blue": "#56B4E9", "bluish green": "#009E73", "yellow": "#F0E442",
            "blue": "#0072B2", "vermillion": "#D55E00", "reddish purple": "#CC79A7"}
@@ -179,8 +184,10 @@ def show_image(ax, image: np.ndarray, title: str = "") -> None:
 
 
 def show_images(images: Sequence[np.ndarray], titles: Sequence[str], width: float = 4.2) -> CourseFigure:
-    """Images (BGR or grey) side by side, titled (``width`` inches each; more than three go in two rows)."""
-    cols = len(images) if len(images) <= 3 else -(-len(images) // 2)  # more than three: two legible rows
+    """Images (BGR or grey) side by side, titled (``width`` inches each, at least :data:`PHOTO_PANEL_IN`; more
+    than two go in rows of two, so that no panel is narrower than :data:`PHOTO_MIN_PX` on a notebook's page)."""
+    width = max(width, PHOTO_PANEL_IN)
+    cols = min(len(images), 2)
     rows = -(-len(images) // cols)
     fig = new_figure(width * cols, width * 0.78 * rows, dpi=PHOTO_DPI)
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
