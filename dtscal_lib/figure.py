@@ -42,8 +42,10 @@ __all__ = ["CourseFigure", "new_figure", "figure_html", "describe", "png_bytes",
 
 #: resolution of plots (dots per inch)
 DPI = 80
-#: camera frames compress poorly as PNG: a lower resolution keeps notebooks small
+#: resolution of figures of camera frames, which a notebook stores as JPEG (:data:`PHOTO_JPEG_QUALITY`): frames
+#: compress poorly as PNG (notebook 03's six frames: 500 kB as PNG, 99 kB as JPEG at quality 90)
 PHOTO_DPI = 70
+PHOTO_JPEG_QUALITY = 90
 #: the narrowest a camera frame is drawn (px): a 640 px frame shown smaller than about half its size hides the
 #: detail the text points at (corners, bent lines, labels); ``tests/test_figure_palette.py`` measures every panel
 PHOTO_MIN_PX = 300
@@ -70,6 +72,8 @@ class CourseFigure(Figure):
     """
 
     alt: str = ""
+    #: a figure of camera frames (made at :data:`PHOTO_DPI`): stored as JPEG, not PNG
+    photo: bool = False
 
     def _repr_mimebundle_(self, include=None, exclude=None) -> dict:
         """What a notebook stores and shows: the PNG in an ``<img>`` with its alt text, and the alt text alone."""
@@ -106,14 +110,21 @@ def describe(fig: Figure) -> str:
 
 
 def figure_html(fig: Figure) -> str:
-    """The figure as an HTML ``<img>``: the PNG inline, its alt text (:func:`describe`) in ``alt``.
+    """The figure as an HTML ``<img>``: the PNG (a photo figure's JPEG) inline, its alt text (:func:`describe`) in
+    ``alt``.
 
     >>> fig = new_figure(1.0, 1.0); fig.alt = 'A "quoted" figure.'
     >>> figure_html(fig)[:32], figure_html(fig).split('alt=')[1]
     ('<img src="data:image/png;base64,', '"A &quot;quoted&quot; figure."/>')
     """
-    data = base64.b64encode(png_bytes(fig)).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(describe(fig), quote=True)}"/>'
+    if getattr(fig, "photo", False):
+        buf = io.BytesIO()
+        fig.savefig(buf, format="jpeg", dpi=fig.dpi, pil_kwargs={"quality": PHOTO_JPEG_QUALITY})
+        mime, data = "image/jpeg", buf.getvalue()
+    else:
+        mime, data = "image/png", png_bytes(fig)
+    src = f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
+    return f'<img src="{src}" alt="{html.escape(describe(fig), quote=True)}"/>'
 
 
 def bgr(colour: str) -> tuple[int, int, int]:
@@ -144,6 +155,7 @@ def new_figure(width_in: float, height_in: float, dpi: int = DPI) -> CourseFigur
 
     with mpl.rc_context(_FONT):
         fig = CourseFigure(figsize=(width_in, height_in), dpi=dpi, layout="constrained")
+    fig.photo = dpi == PHOTO_DPI
     FigureCanvasAgg(fig)
     return fig
 

@@ -82,12 +82,12 @@ def show_ground_result(rectified: np.ndarray, H: np.ndarray, corners: np.ndarray
             else:
                 cv2.circle(grid, (int(round(u)), int(round(v))), 3, bgr(TRUTH_COLOR), -1)
     bird = birdseye_view(rectified, H, x_range=x_range, y_range=y_range, px_per_m=800)
-    fig = new_figure(10.0, 4.4, dpi=PHOTO_DPI)
-    a1, a2 = fig.subplots(1, 2, width_ratios=[1.35, 1])
+    fig = new_figure(11.0, 5.2, dpi=PHOTO_DPI)
+    a1, a2 = fig.subplots(1, 2, width_ratios=[1.2, 1])
     show_image(a1, grid, "rectified frame + 5 cm ground grid (corner 0: the square)")
     for text, u, v in ground_grid_labels(H, grid.shape[1::-1], spacing=0.05, x_range=x_range):
         # drawn by matplotlib, not into the frame: the frame is scaled down, the label keeps the figure's text size
-        a1.text(u + 3, v - 3, text, fontsize=9, color="w", weight="bold", path_effects=_outline())
+        a1.text(u + 3, v - 3, text, fontsize=11, color="w", weight="bold", path_effects=_outline())
     bird_bgr = bird if bird.ndim == 3 else cv2.cvtColor(bird, cv2.COLOR_GRAY2BGR)
     a2.imshow(cv2.cvtColor(bird_bgr, cv2.COLOR_BGR2RGB), extent=(y_range[1], y_range[0], x_range[0], x_range[1]))
     a2.set(xlabel="y (left) [m]", ylabel="x (forward) [m]")
