@@ -29,6 +29,7 @@ import pytest
 from browser import launch_chromium, sync_playwright_or_skip
 from dtscal_lib import camera as cam
 from dtscal_lib import compare, report
+from dtscal_lib.boards import DUCKIETOWN_BOARD
 from dtscal_lib import duckietown as dt
 from dtscal_lib.teaching import course
 from nbtools import SOLUTIONS
@@ -294,6 +295,9 @@ def test_photo_panels_are_at_least_300_px_wide_and_labels_at_the_figures_text_si
                for n in (1, 2, 3, 4) for w in (3.0,)}  # 3.0 in: the narrowest a notebook asks for
     figures["views"] = course.show_views(SimpleNamespace(images=[frame] * 3, image_points=[], size=(640, 480),
                                                          source="three frames", n_views=3))
+    board = np.zeros((280, 360), np.uint8)  # 02's fronto-parallel view of the board, 40 px a square
+    corners = DUCKIETOWN_BOARD.object_points()[:, :2] * 4000 + 100  # any 7x5 grid in the frame
+    figures["warp"] = course.warp_figure(frame[..., 0], corners, board)
     ground = course.show_ground_result(frame, dt.default_H(), None)
     figures["ground"] = ground
     narrow = []
