@@ -5,20 +5,24 @@ Used by the library's report (:mod:`dtscal_lib.report`) and by the teaching laye
 
 Every course figure is a :class:`CourseFigure` made by :func:`new_figure`: no pyplot, no
 global ``rcParams``, no ``plt.show()``. A notebook shows a figure by leaving it as the cell's
-last value (or passing it to ``display``); it is stored as a small PNG (:data:`DPI`, :data:`PHOTO_DPI`) so
-notebooks stay small. Its alt text is a sentence saying what the figure shows (:attr:`CourseFigure.alt`, set by the
-function that draws it), followed by each panel's title and axes (:func:`describe`); it is the same on every machine.
+last value (or passing it to ``display``); it is stored as a small PNG (:data:`DPI`; a figure of
+camera frames as JPEG at :data:`PHOTO_DPI`) so notebooks stay small. Its alt text is a sentence saying
+what the figure shows (:attr:`CourseFigure.alt`, set by the function that draws it), followed by each
+panel's title and axes (:func:`describe`); it is the same on every machine.
 
 The figure is displayed as ``text/html``, an ``<img>`` whose ``alt`` attribute is that text, and as ``text/plain``
-(the same text, for a terminal or a diff). Neither JupyterLab (4.x: its PNG renderer, ``renderImage`` in
+(the same text, for a terminal or a diff). Neither JupyterLab (4.6: its PNG renderer, ``renderImage`` in
 ``@jupyterlab/rendermime``, sets no ``alt``) nor nbconvert's default ``lab`` HTML template (its ``data_png`` block
 writes no ``alt``; the ``classic`` one reads ``output.metadata['image/png']['alt']`` and otherwise writes "No
 description has been provided for this image") can put an alt text on an ``image/png`` output; both prefer
-``text/html`` to ``image/png`` and keep its ``alt``.
+``text/html`` to ``image/png`` and keep its ``alt`` (JupyterLab's sanitizer too, for an untrusted notebook;
+``tests/test_figures_on_screen.py`` checks both in Chromium).
 
 Colours come from :data:`PALETTE`, Okabe and Ito's colour-blind-safe set (Okabe & Ito, *Color Universal Design*,
 2008, https://jfly.uni-koeln.de/color/): no red/green pair, distinguishable under deuteranopia and protanopia
-(``tests/test_figure_palette.py`` checks it with Machado et al.'s 2009 simulation matrices).
+(``tests/test_figure_palette.py`` checks it with Machado et al.'s 2009 simulation matrices). Every colour the kit
+draws, in figures, on frames (:func:`bgr`), in the live tools and the HTML reports, is one of them or a grey
+(:data:`GREY`); a verdict is :data:`GOOD_COLOR`, :data:`WARN_COLOR` or :data:`BAD_COLOR`.
 """
 
 from __future__ import annotations
