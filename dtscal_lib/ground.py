@@ -487,8 +487,36 @@ def birdseye_view(rectified_image: np.ndarray, H, *, x_range=(0.1, 0.6), y_range
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
+#: the ground grid's colour (BGR): Okabe and Ito's bluish green #009E73, a colour of the kit's palette
+#: (:data:`dtscal_lib.figure.PALETTE`; not imported here, which would load matplotlib into every ground user)
+GRID_COLOR = (115, 158, 0)
+
+
+def ground_grid_labels(H, image_size, *, spacing: float = 0.05, x_range=(0.1, 0.6), min_gap_px: float = 12.0):
+    """Where :func:`draw_ground_grid` labels its lines of constant x: ``[(text, u, v), ...]``, near to far.
+
+    Each label is the line's distance ahead in cm, at its pixel for ``y = 0``; labels closer than
+    ``min_gap_px`` rows to the previous one are left out (they would overlap). ``image_size`` is (width, height).
+    """
+    H = _homography(H)
+    w, h = (int(image_size[0]), int(image_size[1]))
+    x0, x1 = map(float, x_range)
+    Hinv = np.linalg.inv(H)
+    ref = np.sign(H[2] @ np.array([(w - 1) / 2.0, h - 1.0, 1.0]))
+    labels, last_v = [], np.inf
+    for x in np.arange(np.ceil(x0 / spacing - 1e-9), np.floor(x1 / spacing + 1e-9) + 1) * spacing:
+        hom = Hinv @ np.array([x, 0.0, 1.0])
+        if np.sign(hom[2]) != ref or abs(hom[2]) < 1e-12:
+            continue
+        u, v = hom[:2] / hom[2]
+        if 0 <= u < w and 0 <= v < h and last_v - v >= min_gap_px:
+            last_v = v
+            labels.append((f"{x * 100:.0f}", float(u), float(v)))
+    return labels
+
+
 def draw_ground_grid(rectified_image: np.ndarray, H, *, spacing: float = 0.05, x_range=(0.1, 0.6),
-                     y_range=(-0.25, 0.25), color=(0, 255, 0), thickness: int = 1,
+                     y_range=(-0.25, 0.25), color=GRID_COLOR, thickness: int = 1,
                      labels: bool = True) -> np.ndarray:
     """Draw ground lines of constant x and constant y (every ``spacing`` metres) on a copy of the image.
 
@@ -541,15 +569,6 @@ def draw_ground_grid(rectified_image: np.ndarray, H, *, spacing: float = 0.05, x
         polyline(np.column_stack([np.full(n, x), np.linspace(y0, y1, n)]))
     for y in ys:
         polyline(np.column_stack([np.linspace(x0, x1, n), np.full(n, y)]))
-    if labels:
-        last_v = np.inf
-        for x in xs:  # near to far: labels climb the image; skip those that would overlap
-            hom = Hinv @ np.array([x, 0.0, 1.0])
-            if np.sign(hom[2]) != ref or abs(hom[2]) < 1e-12:
-                continue
-            u, v = hom[:2] / hom[2]
-            if 0 <= u < w and 0 <= v < h and last_v - v >= 12:
-                last_v = v
-                cv2.putText(out, f"{x * 100:.0f}", (int(u) + 3, int(v) - 3), cv2.FONT_HERSHEY_SIMPLEX,
-                            0.35, color, 1, cv2.LINE_AA)
+    for text, u, v in ground_grid_labels(H, (w, h), spacing=spacing, x_range=x_range) if labels else []:
+        cv2.putText(out, text, (int(u) + 3, int(v) - 3), cv2.FONT_HERSHEY_SIMPLEX, 0.35, color, 1, cv2.LINE_AA)
     return out

@@ -39,7 +39,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from .figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
+from .figure import (BAD_COLOR, GOOD_COLOR, GREY, PALETTE, WARN_COLOR,  # the kit's one figure convention and palette
+                     CourseFigure)
 
 from .errors import DtscalError
 from .quality import REGION_NAMES, Quality
@@ -47,7 +48,7 @@ from .quality import REGION_NAMES, Quality
 __all__ = ["fig_view_rms", "fig_worst_residuals", "fig_residual_histogram", "fig_uncertainty_map", "fig_coverage",
            "write_report", "show", "quality_for_run", "FIGURES"]
 
-_VERDICT_COLOUR = {"good": "#1a7f37", "doubtful": "#b35900", "bad": "#c62828"}
+_VERDICT_COLOUR = {"good": GOOD_COLOR, "doubtful": WARN_COLOR, "bad": BAD_COLOR}
 
 
 def _q(result, quality: Quality | None) -> Quality:
@@ -74,11 +75,11 @@ def fig_view_rms(result, quality: Quality | None = None) -> Figure:
     fig.alt = ("Each view's RMS reprojection error against what the corner noise predicts; views far above "
                 "the line fit worse than noise explains.")
     ax = fig.add_subplot()
-    colours = ["#c62828" if v in flagged else "#4c72b0" for v in range(len(pv))]
+    colours = [BAD_COLOR if v in flagged else PALETTE["blue"] for v in range(len(pv))]
     ax.bar(np.arange(len(pv)), pv, color=colours, width=0.8)
     ax.axhline(np.sqrt(2) * q.noise_sigma, color="k", ls="--", lw=1,
                label=f"expected from corner noise ({np.sqrt(2) * q.noise_sigma:.3f} px)")
-    ax.axhline(VIEW_OUTLIER_FACTOR * np.median(pv), color="#c62828", ls=":", lw=1,
+    ax.axhline(VIEW_OUTLIER_FACTOR * np.median(pv), color=BAD_COLOR, ls=":", lw=1,
                label=f"{VIEW_OUTLIER_FACTOR:g} x median view")
     ax.set_xlabel("view")
     ax.set_ylabel("RMS reprojection error (px)")
@@ -98,9 +99,9 @@ def fig_worst_residuals(result, quality: Quality | None = None, n: int = 4) -> F
     for k, v in enumerate(worst):
         ax = fig.add_subplot(1, len(worst), k + 1)
         p, e = np.asarray(result.image_points[v]).reshape(-1, 2), q.residuals[v]
-        ax.plot(p[:, 0], p[:, 1], ".", color="0.5", ms=3)
+        ax.plot(p[:, 0], p[:, 1], ".", color=GREY["mid"], ms=3)
         ax.quiver(p[:, 0], p[:, 1], e[:, 0] * scale, e[:, 1] * scale, angles="xy", scale_units="xy", scale=1,
-                  color="#c62828", width=0.006)
+                  color=BAD_COLOR, width=0.006)
         _image_axes(ax, result.image_size)
         lo, hi = p.min(axis=0), p.max(axis=0)
         pad = 0.2 * (hi - lo).max() + 30.0  # the board and its arrows, not the whole image
@@ -120,10 +121,12 @@ def fig_residual_histogram(result, quality: Quality | None = None) -> Figure:
     ax = fig.add_subplot()
     lim = max(4 * q.noise_sigma, float(np.quantile(np.abs(e), 0.995)))
     bins = np.linspace(-lim, lim, 61)
-    ax.hist(np.clip(e, -lim, lim), bins=bins, density=True, color="#4c72b0", alpha=0.7, label="residuals (u and v)")
+    ax.hist(np.clip(e, -lim, lim), bins=bins, density=True, color=PALETTE["blue"], alpha=0.7,
+            label="residuals (u and v)")
     x = np.linspace(-lim, lim, 400)
-    for s, style, what in ((q.noise_sigma, "k--", "corner noise"), (q.fit_sigma, "r-", "fit")):
-        ax.plot(x, np.exp(-0.5 * (x / s) ** 2) / (s * np.sqrt(2 * np.pi)), style, lw=1,
+    for s, style, colour, what in ((q.noise_sigma, "--", "k", "corner noise"),
+                                   (q.fit_sigma, "-", BAD_COLOR, "fit")):
+        ax.plot(x, np.exp(-0.5 * (x / s) ** 2) / (s * np.sqrt(2 * np.pi)), style, color=colour, lw=1,
                 label=f"Gaussian, {what} sigma {s:.3f} px")
     ax.set_xlabel("residual (px)")
     ax.set_ylabel("density")
@@ -187,13 +190,13 @@ def fig_coverage(result, quality: Quality | None = None) -> Figure:
         p = np.asarray(p).reshape(-1, 2)
         ax.plot(p[:, 0], p[:, 1], ".", ms=2, alpha=0.6)
     for k in (1, 2):
-        ax.axvline(k * w / 3, color="0.6", lw=0.8)
-        ax.axhline(k * h / 3, color="0.6", lw=0.8)
+        ax.axvline(k * w / 3, color=GREY["mid"], lw=0.8)
+        ax.axhline(k * h / 3, color=GREY["mid"], lw=0.8)
     for r in range(3):
         for c in range(3):
             n = int(q.corner_counts[r, c])
             ax.text((c + 0.5) * w / 3, (r + 0.5) * h / 3, str(n), ha="center", va="center", fontsize=12,
-                    color="#c62828" if REGION_NAMES[r][c] == q.help_region else "k", alpha=0.8)
+                    color=BAD_COLOR if REGION_NAMES[r][c] == q.help_region else "k", alpha=0.8)
     _image_axes(ax, result.image_size)
     ax.set_title(f"where the corners came from ({result.n_points} corners, {result.n_views} views); "
                  f"red: add views here", fontsize=9)
@@ -275,7 +278,7 @@ def write_report(result, directory, quality: Quality | None = None, *, title: st
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}}
-.verdict{{font-size:1.6em;color:#fff;background:{colour};padding:.3em .8em;display:inline-block;border-radius:4px}}
+.verdict{{font-size:1.6em;color:#000;background:{colour};padding:.3em .8em;display:inline-block;border-radius:4px}}
 th{{text-align:left;padding-right:1em}} img{{max-width:100%}} figure{{margin:1.5em 0}}</style></head>
 <body><h1>{html.escape(title)}</h1>
 <p class="verdict" id="verdict">{html.escape(q.verdict)}</p>

@@ -7,7 +7,14 @@ failure, elsewhere a skip.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import secrets
 import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 from ci import in_ci  # noqa: F401 - the one CI rule; re-exported for the browser tests
@@ -27,6 +34,53 @@ def chromium_path() -> str:
             pytest.fail(msg)
         pytest.skip(msg)
     return path
+
+
+def sync_playwright_or_skip():
+    """Playwright's ``sync_playwright``; a skip locally, a failure under CI, when Playwright is not installed."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        if in_ci():
+            pytest.fail("playwright is not installed (pip install -e .[test])")
+        pytest.skip("playwright is not installed (pip install -e .[test])")
+    return sync_playwright
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def jupyterlab(tmp_path: Path, notebooks):
+    """JupyterLab on 127.0.0.1 with a temporary root holding copies of ``notebooks``; yields (url, token, root)."""
+    root = tmp_path / "root"
+    root.mkdir()
+    for nb in notebooks:
+        shutil.copy(nb, root / Path(nb).name)
+    port, token = free_port(), secrets.token_hex(16)
+    env = dict(os.environ, HOME=str(tmp_path / "home"), JUPYTER_CONFIG_DIR=str(tmp_path / "jcfg"),
+               JUPYTER_RUNTIME_DIR=str(tmp_path / "jrun"), JUPYTERLAB_WORKSPACES_DIR=str(tmp_path / "jws"))
+    log = open(tmp_path / "jupyterlab.log", "w")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1", f"--port={port}",
+         f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}", "--ServerApp.open_browser=False",
+         "--allow-root",
+         "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"],
+        cwd=root, env=env, stdout=log, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        wait_until_it_answers(f"{url}/api/status?token={token}", proc, tmp_path / "jupyterlab.log", "JupyterLab")
+        yield url, token, root
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()
 
 
 def launch_chromium(playwright):

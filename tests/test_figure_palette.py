@@ -9,9 +9,14 @@ deuteranope can barely tell apart; every pair of the kit's palette must stay at 
 
 from __future__ import annotations
 
+import ast
 import base64
+import html
+import io
 import itertools
-import struct
+import re
+from pathlib import Path
+from types import SimpleNamespace
 
 import nbformat
 import numpy as np
@@ -73,13 +78,16 @@ def test_alt_text_is_a_sentence_with_the_panels():
     assert repr(figure.new_figure(1, 1)) == "A figure."
 
 
-def _png_size(data: bytes) -> tuple[int, int]:
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    return struct.unpack(">II", data[16:24])
+def _image_size(data: bytes) -> tuple[int, int]:
+    from PIL import Image
+
+    with Image.open(io.BytesIO(data)) as im:
+        return im.size
 
 
 COURSE = ["01_pinhole_projection.ipynb", "02_homography.ipynb", "03_intrinsic_calibration.ipynb",
           "03b_calibration_quality.ipynb", "04_distortion_rectification.ipynb", "05_extrinsic_calibration.ipynb"]
+_IMG = re.compile(r'<img src="data:image/(png|jpeg);base64,([A-Za-z0-9+/=]+)" alt="([^"]*)"')
 
 
 @pytest.mark.parametrize("name", COURSE)
@@ -89,13 +97,147 @@ def test_every_stored_figure_has_a_descriptive_alt_text_and_a_legible_size(name)
     for i, cell in enumerate(nb.cells):
         for out in cell.get("outputs", []) if cell.cell_type == "code" else []:
             data = out.get("data", {})
-            if "image/png" not in data:
+            assert "image/png" not in data, f"{name} cell {i}: a bare PNG (no alt attribute can reach it)"
+            found = _IMG.search(data.get("text/html", ""))
+            if not found:
                 continue
             n += 1
-            alt = data.get("text/plain", "")
+            alt = html.unescape(found.group(3))
+            assert alt == data.get("text/plain"), f"{name} cell {i}: the alt attribute is not the figure's text"
             assert not alt.startswith("<") and "CourseFigure" not in alt, f"{name} cell {i}: alt text {alt!r}"
             words = alt.split()
             assert len(words) >= 10 and alt.rstrip().endswith("."), f"{name} cell {i}: alt text too thin: {alt!r}"
-            w, h = _png_size(base64.b64decode(data["image/png"]))
+            w, h = _image_size(base64.b64decode(found.group(2)))
             assert h >= 150 and w / h <= 4.5, f"{name} cell {i}: a {w}x{h} figure is squeezed"
     assert n, f"{name}: no figure found"
+
+
+# --- every colour the kit draws -------------------------------------------------------------------------------------
+
+KIT = Path(figure.__file__).parent
+#: synth.py paints the synthetic world (the room, the printed board, a window frame): scenery, not a mark the kit
+#: draws to tell the user something
+SCENERY = {"synth.py"}
+#: colour maps the kit may use: perceptually uniform and readable under colour-vision deficiency (matplotlib's
+#: viridis family, designed for it: van der Walt and Smith, "mpl colormaps", SciPy 2015) and grey for frames
+COLOUR_MAPS = {"viridis", "magma", "magma_r", "cividis", "gray"}
+_CV2_DRAWING = {"line", "circle", "rectangle", "polylines", "putText", "drawMarker", "arrowedLine", "fillPoly",
+                "fillConvexPoly", "ellipse"}
+_COLOUR_KEYWORDS = {"color", "colour", "c", "colors", "facecolor", "edgecolor", "foreground", "markerfacecolor",
+                    "markeredgecolor", "mfc", "mec"}
+_HEX = re.compile(r"#(?:[0-9a-fA-F]{6}|[0-9a-fA-F]{3})\b")
+
+
+def _allowed(hex_colour: str) -> bool:
+    """Of the palette, or a neutral grey (black and white included)."""
+    h = hex_colour.lower()
+    if len(h) == 4:
+        h = "#" + "".join(ch * 2 for ch in h[1:])
+    r, g, b = (h[1:3], h[3:5], h[5:7])
+    return h in {c.lower() for c in figure.PALETTE.values()} or r == g == b
+
+
+def _bgr_tuple(node) -> str | None:
+    if isinstance(node, ast.Tuple) and len(node.elts) == 3 and all(
+            isinstance(e, ast.Constant) and isinstance(e.value, int) for e in node.elts):
+        b, g, r = (e.value for e in node.elts)
+        return f"#{r:02x}{g:02x}{b:02x}"
+    return None
+
+
+def kit_colours(source: str) -> list[tuple[int, str, str]]:
+    """Every colour a module's code draws with, as ``(line, what, colour)``; ``colour`` is #rrggbb or a name.
+
+    Hex colours in any string (HTML, SVG, matplotlib), matplotlib colour keywords and format strings
+    ("b+", "r-"), OpenCV drawing calls' BGR tuples, BGR tuples bound to a ``*COLOR*`` name or a ``color``
+    parameter's default, and colour-map names.
+    """
+    from matplotlib.colors import to_hex
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            found += [(node.lineno, "hex in a string", m.group(0)) for m in _HEX.finditer(node.value)]
+        if isinstance(node, ast.Call):
+            name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            for kw in node.keywords:
+                if kw.arg in _COLOUR_KEYWORDS and isinstance(kw.value, ast.Constant) and isinstance(kw.value.value,
+                                                                                                   str):
+                    found.append((node.lineno, f"{name}({kw.arg}=)", to_hex(kw.value.value)))
+                if kw.arg == "cmap" and isinstance(kw.value, ast.Constant):
+                    found.append((node.lineno, "colour map", f"cmap:{kw.value.value}"))
+            if name in ("plot", "loglog", "semilogx", "semilogy") and len(node.args) >= 2:
+                fmt = node.args[-1]
+                if isinstance(fmt, ast.Constant) and isinstance(fmt.value, str):
+                    found += [(node.lineno, f"{name} format {fmt.value!r}", to_hex(ch))
+                              for ch in re.findall(r"[bgrcmykw]", fmt.value)]
+            if name in _CV2_DRAWING:
+                found += [(node.lineno, f"cv2.{name}", c) for c in map(_bgr_tuple, node.args) if c]
+        if isinstance(node, ast.Assign) and _bgr_tuple(node.value) and any(
+                "COLO" in getattr(t, "id", "").upper() for t in node.targets):
+            found.append((node.lineno, "a *COLOR* constant", _bgr_tuple(node.value)))
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            args = node.args.args[len(node.args.args) - len(node.args.defaults):] + node.args.kwonlyargs
+            defaults = node.args.defaults + [d for d in node.args.kw_defaults]
+            for a, d in zip(args, defaults):
+                if a.arg in ("color", "colour") and _bgr_tuple(d):
+                    found.append((node.lineno, f"{node.name}({a.arg}=) default", _bgr_tuple(d)))
+        if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Attribute) and node.value.attr == "colormaps":
+            found.append((node.lineno, "colour map", f"cmap:{getattr(node.slice, 'value', '?')}"))
+    return found
+
+
+def test_the_colour_scan_itself_finds_what_the_kit_used_to_draw():
+    old = '''
+GREEN, GREY, RED = "#2e9d46", "#9aa0a6", "#c0392b"
+def draw_ground_grid(img, H, *, color=(0, 255, 0)):
+    cv2.polylines(small, [hull], True, (0, 200, 0), 1)
+    ax.plot(K[0, 2], K[1, 2], "b+", ms=12)
+    ax.scatter([0], [0], [0], c="r", s=15)
+    ax.imshow(x, cmap="jet")
+'''
+    colours = {c for _, _, c in kit_colours(old)}
+    assert {"#2e9d46", "#c0392b", "#00ff00", "#00c800", "#0000ff", "#ff0000", "cmap:jet"} <= colours
+    assert not _allowed("#2e9d46") and _allowed("#9AA09A".replace("A09A", "9A9A")) and _allowed("#D55E00")
+
+
+def test_every_colour_the_kit_draws_is_of_the_palette():
+    bad = []
+    n = 0
+    for path in sorted(KIT.rglob("*.py")):
+        if path.name in SCENERY:
+            continue
+        for line, what, colour in kit_colours(path.read_text(encoding="utf-8")):
+            n += 1
+            ok = colour[5:] in COLOUR_MAPS if colour.startswith("cmap:") else _allowed(colour)
+            if not ok:
+                bad.append(f"{path.relative_to(KIT)}:{line} {what} {colour}")
+    assert n > 30, f"the scan found only {n} colours: it no longer sees the kit's drawing code"
+    assert not bad, "colours outside the palette (dtscal_lib/figure.py PALETTE, or a grey):\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("deficiency", sorted(MACHADO))
+def test_the_live_tools_good_and_bad_colours_are_the_palettes_and_stay_apart(deficiency):
+    from dtscal_lib.ui import render
+
+    verdict = {v: render.verdict_html(SimpleNamespace(verdict=v, findings=[])) for v in ("good", "doubtful", "bad")}
+    shown = {**verdict, "full": render.bars_html([SimpleNamespace(name="X", progress=1.0, full=True)]),
+             "ok": render.message_html("saved", "ok"), "error": render.message_html("failed", "error"),
+             "chart": render.error_chart_svg([0.2, 0.9, 0.3], dropped_positions=[1])}
+    used = {k: set(_HEX.findall(v)) for k, v in shown.items()}
+    off = {k: sorted(c for c in cs if not _allowed(c)) for k, cs in used.items()}
+    assert not any(off.values()), f"the live tools draw outside the palette: {off}"
+    palette = {c.lower() for c in figure.PALETTE.values()}
+    (good,), (bad,) = ({c for c in used[v] if c.lower() in palette} for v in ("good", "bad"))  # the verdict's colour
+    assert _delta_e(good, bad, MACHADO[deficiency]) >= MIN_DELTA_E, (good, bad)
+
+
+def test_the_ground_grid_is_drawn_in_a_palette_colour():
+    from dtscal_lib import duckietown as dt
+    from dtscal_lib.ground import draw_ground_grid
+
+    out = draw_ground_grid(np.zeros((480, 640), np.uint8), dt.default_H(), spacing=0.05)
+    drawn = out.reshape(-1, 3).astype(int)
+    # anti-aliasing blends the lines' colour with the black frame; where a line covers a whole pixel it is pure
+    b, g, r = drawn[np.argmax(drawn.sum(axis=1))]
+    assert _allowed(f"#{r:02x}{g:02x}{b:02x}"), f"the grid is drawn in #{r:02x}{g:02x}{b:02x}"

@@ -77,7 +77,7 @@ def one_bad_view():
 def _red_bars(fig) -> list[int]:
     from matplotlib.colors import to_hex
 
-    return [i for i, bar in enumerate(fig.axes[0].patches) if to_hex(bar.get_facecolor()) == "#c62828"]
+    return [i for i, bar in enumerate(fig.axes[0].patches) if to_hex(bar.get_facecolor()) == report.BAD_COLOR.lower()]
 
 
 def test_figures_show_the_verdict_and_compute_it_when_not_given(good, one_bad_view):

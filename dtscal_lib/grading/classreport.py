@@ -97,7 +97,7 @@ body {{ font-family: sans-serif; margin: 2em; max-width: 70em; }}
 table {{ border-collapse: collapse; margin-bottom: 2em; }}
 th, td {{ border: 1px solid #bbb; padding: 0.3em 0.6em; text-align: left; vertical-align: top; }}
 td.band {{ position: relative; min-width: 6em; }}
-.bar {{ position: absolute; left: 0; top: 0; bottom: 0; background: #9cc3e6; z-index: -1; }}
+.bar {{ position: absolute; left: 0; top: 0; bottom: 0; background: #56B4E9; z-index: -1; }}
 </style></head><body>
 <h1>Class report</h1>
 <p id="summary">{n} student(s); mean total {mean_total:.1f} / {maximum:g} points{

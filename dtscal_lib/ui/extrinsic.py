@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from ..boards import DUCKIETOWN_BOARD, Board
+from ..figure import ARROW_COLOR, bgr
 from ..ground import birdseye_view, draw_ground_grid, pixel_to_ground
 from . import render
 from .extrinsic_driver import KEPT, ExtrinsicDriver, _MapsCamera  # noqa: F401  (_MapsCamera's home was here)
@@ -156,7 +157,7 @@ class LiveExtrinsics(ExtrinsicDriver):
         fit = None
         if res is not None:
             for p in res.corners_rectified:
-                cv2.circle(view, (int(round(p[0])), int(round(p[1]))), 3, (0, 0, 255), -1, cv2.LINE_AA)
+                cv2.circle(view, (int(round(p[0])), int(round(p[1]))), 3, bgr(ARROW_COLOR), -1, cv2.LINE_AA)
             fit = pixel_to_ground(res.H, res.corners_rectified)
             err, best_err = float(np.mean(res.residual_mm)), float(np.mean(best.residual_mm))
             self.error_text.value = (

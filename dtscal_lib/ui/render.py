@@ -12,9 +12,13 @@ import math
 import cv2
 import numpy as np
 
+from ..figure import BAD_COLOR, GOOD_COLOR, GREY as _GREYS, PALETTE, WARN_COLOR, bgr
+
 #: JPEG quality of the live views (the widget sends each frame as one JPEG)
 JPEG_QUALITY = 80
-GREEN, GREY, RED = "#2e9d46", "#9aa0a6", "#c0392b"
+#: good (a full bar, a good verdict), still filling, bad (a dropped sample, an error): the kit's palette
+#: (dtscal_lib.figure), told apart under deuteranopia and protanopia (tests/test_figure_palette.py)
+GREEN, GREY, RED = GOOD_COLOR, _GREYS["mid"], BAD_COLOR
 
 
 def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
@@ -77,7 +81,7 @@ def thumbnail(image: np.ndarray, corners: np.ndarray | None, width: int = 96) ->
         small = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
     if corners is not None:
         pts = np.round(np.asarray(corners, dtype=np.float64) * s).astype(np.int32).reshape(-1, 1, 2)
-        cv2.polylines(small, [cv2.convexHull(pts)], True, (0, 200, 0), 1, cv2.LINE_AA)
+        cv2.polylines(small, [cv2.convexHull(pts)], True, bgr(GOOD_COLOR), 1, cv2.LINE_AA)
     return encode_jpeg(small, 75)
 
 
@@ -90,7 +94,7 @@ def bars_html(bars) -> str:
         rows.append(
             f'<div class="dtscal-bar" data-name="{b.name}" data-full="{int(b.full)}" style="display:flex;'
             f'align-items:center;gap:6px;margin:2px 0"><span style="width:36px">{b.name}</span>'
-            f'<span style="display:inline-block;width:180px;height:12px;background:#e8eaed;border-radius:3px">'
+            f'<span style="display:inline-block;width:180px;height:12px;background:{_GREYS["pale"]};border-radius:3px">'
             f'<span style="display:block;width:{pct}%;height:12px;background:{colour};border-radius:3px"></span>'
             f"</span><span>{pct}%</span></div>"
         )
@@ -118,10 +122,10 @@ def error_chart_svg(per_view_rms, dropped_positions=(), width: int = 360, height
     bars = []
     for i, e in enumerate(v):
         hgt = (height - 16) * float(e) / top
-        colour = RED if i in set(dropped_positions) else "#4a78c2"
+        colour = RED if i in set(dropped_positions) else PALETTE["blue"]
         bars.append(f'<rect x="{28 + i * bw:.1f}" y="{height - 12 - hgt:.1f}" width="{max(0.8, bw - 1):.1f}" '
                     f'height="{hgt:.1f}" fill="{colour}"><title>sample {i + 1}: {e:.3f} px</title></rect>')
-    return (f'<svg width="{width}" height="{height}" style="background:#fafafa">'
+    return (f'<svg width="{width}" height="{height}" style="background:#FAFAFA">'
             f'<text x="0" y="10" font-size="9">{top:.2f} px</text>'
             f'<text x="0" y="{height - 2}" font-size="9">0</text>'
             f'<text x="{width - 90}" y="{height - 2}" font-size="9">sample 1..{n}</text>' + "".join(bars) + "</svg>")
@@ -159,7 +163,7 @@ def calibration_html(result, dropped: list[int], n_samples: int, verdict: str | 
 
 def message_html(text: str, kind: str = "info") -> str:
     """One status line; ``kind`` is ``info``, ``ok`` or ``error`` (colour only)."""
-    colour = {"ok": GREEN, "error": RED}.get(kind, "#333")
+    colour = {"ok": GREEN, "error": RED}.get(kind, _GREYS["dark"])
     return f'<div class="dtscal-msg dtscal-{kind}" style="color:{colour}">{html.escape(text)}</div>'
 
 
@@ -214,8 +218,8 @@ def top_view(ground_true: np.ndarray, ground_fit: np.ndarray | None, *, px_per_m
         shown = to_px(g_true + magnify * (g_fit - g_true))
         for a, b in zip(true_px, shown):
             pa, pb = (int(round(a[0])), int(round(a[1]))), (int(round(b[0])), int(round(b[1])))
-            cv2.line(img, pa, pb, (0, 0, 200), 1, cv2.LINE_AA)
-            cv2.drawMarker(img, pb, (0, 0, 200), cv2.MARKER_CROSS, 7, 1)
+            cv2.line(img, pa, pb, bgr(BAD_COLOR), 1, cv2.LINE_AA)
+            cv2.drawMarker(img, pb, bgr(BAD_COLOR), cv2.MARKER_CROSS, 7, 1)
     cv2.putText(img, f"errors x{magnify:g}; grid 1 cm", (6, h - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                 (60, 60, 60), 1, cv2.LINE_AA)
     return img
@@ -229,7 +233,7 @@ def verdict_html(quality) -> str | None:
         return message_html(quality)
     findings = "".join(f"<li>{html.escape(str(f.message))} <i>{html.escape(str(f.advice))}</i></li>"
                        for f in getattr(quality, "findings", []))
-    colour = {"good": GREEN, "bad": RED}.get(str(quality.verdict), "#b7791f")
+    colour = {"good": GREEN, "bad": RED}.get(str(quality.verdict), WARN_COLOR)
     return (f'<span class="dtscal-verdict" style="color:{colour}"><b>{html.escape(str(quality.verdict))}</b></span>'
             + (f"<ul>{findings}</ul>" if findings else ""))
 

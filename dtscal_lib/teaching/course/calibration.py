@@ -10,7 +10,7 @@ import numpy as np
 from ... import camera as cam
 from ...boards import DUCKIETOWN_BOARD, Board
 from ...errors import DtscalError
-from .figure import PHOTO_DPI, CourseFigure, new_figure
+from .figure import PHOTO_DPI, PHOTO_PANEL_IN, CourseFigure, new_figure
 from .projection import sample_views
 from .session import IntrinsicViews, board_homographies, find_corners
 
@@ -18,7 +18,7 @@ __all__ = ["show_views", "intrinsics_table", "pose_from_homography_opencv", "plo
            "degradation_experiment"]
 
 
-def show_views(views: IntrinsicViews, board: Board = DUCKIETOWN_BOARD, cols: int = 3) -> CourseFigure:
+def show_views(views: IntrinsicViews, board: Board = DUCKIETOWN_BOARD, cols: int = 2) -> CourseFigure:
     """A montage of a few recorded frames with the detected corners drawn."""
     if not views.images:
         fig = new_figure(5, 3.5)
@@ -30,7 +30,7 @@ def show_views(views: IntrinsicViews, board: Board = DUCKIETOWN_BOARD, cols: int
         return fig
     n = len(views.images)
     rows = int(np.ceil(n / cols))
-    fig = new_figure(2.6 * cols, 2.0 * rows, dpi=PHOTO_DPI)
+    fig = new_figure(PHOTO_PANEL_IN * cols, PHOTO_PANEL_IN * 0.75 * rows, dpi=PHOTO_DPI)
     axes = np.ravel(fig.subplots(rows, cols, squeeze=False))
     for ax in axes:
         ax.axis("off")
@@ -125,7 +125,7 @@ def plot_board_poses(poses, board: Board = DUCKIETOWN_BOARD,
     f = 0.06
     for c in ([-1, -0.75], [1, -0.75], [1, 0.75], [-1, 0.75]):
         ax.plot([0, c[0] * f], [0, 1.2 * f], [0, -c[1] * f], "k-", lw=0.8)
-    ax.scatter([0], [0], [0], c="r", s=15)
+    ax.scatter([0], [0], [0], c="k", s=15)
     allp = np.array([np.asarray(t).reshape(3) for _, t in poses])
     lim = max(0.3, float(np.abs(allp).max()) + 0.1)
     ax.set(xlim=(-lim / 2, lim / 2), ylim=(0, lim), zlim=(-lim / 2, lim / 2),

@@ -10,7 +10,7 @@ import numpy as np
 from ... import camera as cam
 from ... import duckietown as dt
 from .fallback import Fallback
-from .figure import CourseFigure, new_figure, show_images
+from .figure import TRUTH_COLOR, CourseFigure, new_figure, show_images
 
 __all__ = ["grid_image", "distort_image", "plot_distortion_field", "plot_undistortion_error", "compare_alpha"]
 
@@ -57,10 +57,12 @@ def plot_distortion_field(distort: Callable, K, dist, size=dt.IMAGE_SIZE, step: 
     mag = np.hypot(d[:, 0], d[:, 1])
     fig = new_figure(6.4, 4.6)
     ax = fig.add_subplot()
-    q = ax.quiver(uv[:, 0], uv[:, 1], d[:, 0], -d[:, 1], mag, angles="xy", scale_units="xy", scale=1,
+    # angles="xy": an arrow runs from (u, v) to (u + du, v + dv) in data coordinates, so on the image's v-down axis
+    # the displacement is given as it is (negating dv would draw every vertical component backwards)
+    q = ax.quiver(uv[:, 0], uv[:, 1], d[:, 0], d[:, 1], mag, angles="xy", scale_units="xy", scale=1,
                   width=0.003, cmap="magma_r")
     fig.colorbar(q, ax=ax, label="displacement [px]")
-    ax.plot(K[0, 2], K[1, 2], "b+", ms=12, label="principal point")
+    ax.plot(K[0, 2], K[1, 2], "+", color=TRUTH_COLOR, ms=12, mew=2, label="principal point")
     ax.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title="lens distortion: pinhole pixel -> recorded pixel")
     ax.legend(loc="lower right", fontsize=7)
     fig.alt = ("Arrows over the image from where a pinhole camera would see a point to where the lens puts it; "

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 
 from ...boards import DUCKIETOWN_BOARD, Board
-from ...ground import birdseye_view, draw_ground_grid, ground_to_pixel, pixel_to_ground
-from .figure import PHOTO_DPI, TRUTH_COLOR, CourseFigure, new_figure, show_image
+from ...ground import birdseye_view, draw_ground_grid, ground_grid_labels, ground_to_pixel, pixel_to_ground
+from .figure import ARROW_COLOR, PHOTO_DPI, TRUTH_COLOR, CourseFigure, bgr, new_figure, show_image
 
 __all__ = ["plot_ground_layout", "ground_error_mm", "ground_error_report", "show_ground_result"]
 
@@ -64,23 +64,32 @@ def ground_error_report(H: np.ndarray, H_true: np.ndarray,
     return "\n".join(lines)
 
 
+def _outline():
+    from matplotlib import patheffects
+
+    return [patheffects.withStroke(linewidth=2.5, foreground="k")]  # white text legible on any part of the frame
+
+
 def show_ground_result(rectified: np.ndarray, H: np.ndarray, corners: np.ndarray | None = None,
                        x_range=(0.1, 0.5), y_range=(-0.2, 0.2)) -> CourseFigure:
     """The rectified frame with the ground grid drawn back through H, and the bird's-eye view."""
-    grid = draw_ground_grid(rectified, H, spacing=0.05, x_range=x_range, y_range=y_range)
+    grid = draw_ground_grid(rectified, H, spacing=0.05, x_range=x_range, y_range=y_range, labels=False)
     if corners is not None:
         for k, (u, v) in enumerate(np.asarray(corners)):
             if k == 0:  # corner 0: a larger square, not only another colour
                 cv2.rectangle(grid, (int(round(u)) - 5, int(round(v)) - 5), (int(round(u)) + 5, int(round(v)) + 5),
-                              (0, 94, 213), -1)
+                              bgr(ARROW_COLOR), -1)
             else:
-                cv2.circle(grid, (int(round(u)), int(round(v))), 3, (178, 114, 0), -1)
+                cv2.circle(grid, (int(round(u)), int(round(v))), 3, bgr(TRUTH_COLOR), -1)
     bird = birdseye_view(rectified, H, x_range=x_range, y_range=y_range, px_per_m=800)
-    fig = new_figure(9.5, 3.8, dpi=PHOTO_DPI)
-    a1, a2 = fig.subplots(1, 2, width_ratios=[1.35, 1])
+    fig = new_figure(11.0, 5.2, dpi=PHOTO_DPI)
+    a1, a2 = fig.subplots(1, 2, width_ratios=[1.2, 1])
     show_image(a1, grid, "rectified frame + 5 cm ground grid (corner 0: the square)")
-    bgr = bird if bird.ndim == 3 else cv2.cvtColor(bird, cv2.COLOR_GRAY2BGR)
-    a2.imshow(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), extent=(y_range[1], y_range[0], x_range[0], x_range[1]))
+    for text, u, v in ground_grid_labels(H, grid.shape[1::-1], spacing=0.05, x_range=x_range):
+        # drawn by matplotlib, not into the frame: the frame is scaled down, the label keeps the figure's text size
+        a1.text(u + 3, v - 3, text, fontsize=11, color="w", weight="bold", path_effects=_outline())
+    bird_bgr = bird if bird.ndim == 3 else cv2.cvtColor(bird, cv2.COLOR_GRAY2BGR)
+    a2.imshow(cv2.cvtColor(bird_bgr, cv2.COLOR_BGR2RGB), extent=(y_range[1], y_range[0], x_range[0], x_range[1]))
     a2.set(xlabel="y (left) [m]", ylabel="x (forward) [m]")
     a2.set_title("bird's-eye view", fontsize=9)
     fig.alt = ("Left: the rectified frame with a 5 cm ground grid drawn back through the homography and the board's "

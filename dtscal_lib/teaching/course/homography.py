@@ -11,7 +11,8 @@ from ...boards import DUCKIETOWN_BOARD, Board
 from ...duckietown import IMAGE_SIZE
 from ...homography import apply_homography, transfer_rms
 from .fallback import Fallback
-from .figure import ARROW_COLOR, BOARD_COLOR, OTHER_COLOR, TRUTH_COLOR, CourseFigure, draw_board, image_axes, new_figure
+from .figure import (ARROW_COLOR, BOARD_COLOR, OTHER_COLOR, PHOTO_DPI, TRUTH_COLOR, CourseFigure, draw_board,
+                     image_axes, new_figure)
 
 __all__ = ["fronto_parallel_view", "warp_figure", "unnormalized_dlt", "conditioning_experiment",
            "conditioning_summary", "conditioning_figure", "residual_figure"]
@@ -38,7 +39,7 @@ def fronto_parallel_view(image: np.ndarray, H_board_to_image: np.ndarray, board:
 def warp_figure(image: np.ndarray, corners: np.ndarray, warped: np.ndarray, board: Board = DUCKIETOWN_BOARD,
                 px_per_square: int = 40, margin_squares: float = 1.5) -> CourseFigure:
     """Left: the frame with its detected corners; right: the fronto-parallel view with the ideal grid."""
-    fig = new_figure(8.5, 3.2, dpi=64)
+    fig = new_figure(11.0, 4.5, dpi=PHOTO_DPI)
     a, b = fig.subplots(1, 2, width_ratios=[image.shape[1] / image.shape[0], warped.shape[1] / warped.shape[0]])
     a.imshow(image, cmap="gray", vmin=0, vmax=255)
     draw_board(a, corners, board)

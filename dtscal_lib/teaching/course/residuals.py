@@ -57,7 +57,8 @@ def plot_reprojection(residual_sets: dict, views: IntrinsicViews, image_points=N
     pts = views.image_points if image_points is None else image_points
     uv = np.concatenate(pts)
     res = np.concatenate(residual_sets[names[0]])
-    a2.quiver(uv[:, 0], uv[:, 1], res[:, 0] * scale, -res[:, 1] * scale, np.hypot(res[:, 0], res[:, 1]),
+    # angles="xy" on the image's v-down axis: the residual as it is (a negated v would point the arrows backwards)
+    a2.quiver(uv[:, 0], uv[:, 1], res[:, 0] * scale, res[:, 1] * scale, np.hypot(res[:, 0], res[:, 1]),
               angles="xy", scale_units="xy", scale=1, width=0.004, cmap="viridis")
     w, h = views.size
     a2.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title=f"{names[0]}: residuals x{scale:g}")
