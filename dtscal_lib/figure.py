@@ -41,7 +41,8 @@ from .boards import DUCKIETOWN_BOARD, Board
 from .duckietown import IMAGE_SIZE
 
 __all__ = ["CourseFigure", "new_figure", "figure_html", "describe", "png_bytes", "image_axes", "draw_board",
-           "show_image", "show_images", "bgr", "DPI", "PHOTO_DPI", "PHOTO_MIN_PX", "PHOTO_PANEL_IN", "PALETTE", "GREY",
+           "show_image", "show_images", "bgr", "outlined", "DPI", "PHOTO_DPI", "PHOTO_MIN_PX", "PHOTO_PANEL_IN",
+           "PALETTE", "GREY",
            "BOARD_COLOR", "TRUTH_COLOR", "OTHER_COLOR", "ARROW_COLOR", "GOOD_COLOR", "WARN_COLOR", "BAD_COLOR"]
 
 #: resolution of plots (dots per inch)
@@ -138,6 +139,13 @@ def bgr(colour: str) -> tuple[int, int, int]:
     (0, 94, 213)
     """
     return int(colour[5:7], 16), int(colour[3:5], 16), int(colour[1:3], 16)
+
+
+def outlined() -> list:
+    """Path effects for white text on a picture or a colour map: a dark outline keeps it legible on any colour."""
+    from matplotlib import patheffects
+
+    return [patheffects.withStroke(linewidth=2.5, foreground="k")]
 
 
 def png_bytes(fig: Figure, dpi: float | None = None) -> bytes:

@@ -40,7 +40,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .figure import (BAD_COLOR, GOOD_COLOR, GREY, PALETTE, WARN_COLOR,  # the kit's one figure convention and palette
-                     CourseFigure)
+                     CourseFigure, outlined)
 
 from .errors import DtscalError
 from .quality import REGION_NAMES, Quality
@@ -156,7 +156,7 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
     for (x, y), s in zip(u.corners, u.corner_sigma):
         ax.text(x + (10 if x < 1 else -10), y + (22 if y < 1 else -12), "?" if np.isnan(s) else f"{s:.2f} px",
                 ha="left" if x < 1 else "right", color="w", fontsize=9, weight="bold",
-                path_effects=[_outline()])  # white on any colour of the map: a dark outline keeps it legible
+                path_effects=outlined())  # white on any colour of the map: a dark outline keeps it legible
     _image_axes(ax, result.image_size)
     where = "infinity" if not np.isfinite(u.distance) else f"{u.distance:.3g} m"
     corners = ("lens model not invertible there (grey)" if np.isnan(u.corner_mean)
@@ -165,12 +165,6 @@ def fig_uncertainty_map(result, quality: Quality | None = None) -> Figure:
     ax.set_title(f"projection uncertainty, points at distance {where}\nimage corners: {corners}; "
                  f"more data would help most: {u.worst_region()}", fontsize=9)
     return fig
-
-
-def _outline():
-    from matplotlib import patheffects
-
-    return patheffects.withStroke(linewidth=2.5, foreground="k")
 
 
 def _log_norm(levels):

@@ -154,12 +154,17 @@ def rendered_pages(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def chromium_page():
+def chromium():
+    """One headless Chromium for the file (Playwright's sync API runs one instance per thread)."""
     with sync_playwright_or_skip()() as p:
         browser = launch_chromium(p)
-        page = browser.new_page(viewport={"width": 1280, "height": 900})
-        yield page
+        yield browser
         browser.close()
+
+
+@pytest.fixture(scope="module")
+def chromium_page(chromium):
+    return chromium.new_page(viewport={"width": 1280, "height": 900})
 
 
 # per cell of the page, in order: its kind and every image in its outputs (decoded size, shown size, alt)
@@ -227,21 +232,20 @@ def test_a_figures_alt_text_reaches_the_img_in_nbconvert_html_in_chromium(chromi
 
 
 @pytest.mark.slow
-def test_a_figures_alt_text_reaches_the_img_in_jupyterlab(tmp_path):
+def test_a_figures_alt_text_reaches_the_img_in_jupyterlab(tmp_path, chromium):
     """Stored in a notebook (untrusted: JupyterLab sanitizes its HTML) and opened in JupyterLab in Chromium."""
     from browser import jupyterlab, open_notebook
 
     fig = course.plot_distortion_field(cam.distort_normalized, dt.default_K(), dt.default_dist(), step=64)
     notebook = tmp_path / "one_figure.ipynb"
     nbformat.write(_one_figure_notebook(fig), str(notebook))
-    with jupyterlab(tmp_path, [notebook]) as (url, token, _root), sync_playwright_or_skip()() as p:
-        browser = launch_chromium(p)
-        page = browser.new_page(viewport={"width": 1280, "height": 900})
+    with jupyterlab(tmp_path, [notebook]) as (url, token, _root):
+        page = chromium.new_page(viewport={"width": 1280, "height": 900})
         open_notebook(page, f"{url}/lab/tree/{notebook.name}?token={token}")
         img = page.locator(".jp-OutputArea-output img")
         img.wait_for(timeout=60_000)
         alt, natural = img.evaluate("i => [i.getAttribute('alt'), i.naturalWidth]")
-        browser.close()
+        page.close()
     assert alt == repr(fig) and natural == fig.get_size_inches()[0] * fig.dpi
 
 

@@ -7,7 +7,7 @@ import numpy as np
 
 from ...boards import DUCKIETOWN_BOARD, Board
 from ...ground import birdseye_view, draw_ground_grid, ground_grid_labels, ground_to_pixel, pixel_to_ground
-from .figure import ARROW_COLOR, PHOTO_DPI, TRUTH_COLOR, CourseFigure, bgr, new_figure, show_image
+from .figure import ARROW_COLOR, PHOTO_DPI, TRUTH_COLOR, CourseFigure, bgr, new_figure, outlined, show_image
 
 __all__ = ["plot_ground_layout", "ground_error_mm", "ground_error_report", "show_ground_result"]
 
@@ -64,12 +64,6 @@ def ground_error_report(H: np.ndarray, H_true: np.ndarray,
     return "\n".join(lines)
 
 
-def _outline():
-    from matplotlib import patheffects
-
-    return [patheffects.withStroke(linewidth=2.5, foreground="k")]  # white text legible on any part of the frame
-
-
 def show_ground_result(rectified: np.ndarray, H: np.ndarray, corners: np.ndarray | None = None,
                        x_range=(0.1, 0.5), y_range=(-0.2, 0.2)) -> CourseFigure:
     """The rectified frame with the ground grid drawn back through H, and the bird's-eye view."""
@@ -87,7 +81,7 @@ def show_ground_result(rectified: np.ndarray, H: np.ndarray, corners: np.ndarray
     show_image(a1, grid, "rectified frame + 5 cm ground grid (corner 0: the square)")
     for text, u, v in ground_grid_labels(H, grid.shape[1::-1], spacing=0.05, x_range=x_range):
         # drawn by matplotlib, not into the frame: the frame is scaled down, the label keeps the figure's text size
-        a1.text(u + 3, v - 3, text, fontsize=11, color="w", weight="bold", path_effects=_outline())
+        a1.text(u + 3, v - 3, text, fontsize=11, color="w", weight="bold", path_effects=outlined())
     bird_bgr = bird if bird.ndim == 3 else cv2.cvtColor(bird, cv2.COLOR_GRAY2BGR)
     a2.imshow(cv2.cvtColor(bird_bgr, cv2.COLOR_BGR2RGB), extent=(y_range[1], y_range[0], x_range[0], x_range[1]))
     a2.set(xlabel="y (left) [m]", ylabel="x (forward) [m]")
