@@ -90,7 +90,7 @@ def named(q, kind: str, view=None) -> bool:
     if isinstance(q, str):
         return False
     for f in q.findings:
-        if kind == "view" and f.code in ("outlier_views", "outlier_corners") and view in f.views:
+        if kind == "view" and f.code in ("shifted_part", "outlier_views") and view in f.views:
             return True
         if kind == "column" and f.code == "column_offset":
             return True
@@ -103,7 +103,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--subsets", type=int, default=40)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--sizes", type=int, default=6, help="planted subsets per defect size")
+    ap.add_argument("--sizes", type=int, default=8, help="planted subsets per defect size")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     data = {side: views(side) for side in ("left", "right")}
@@ -123,8 +123,8 @@ def main() -> None:
                 rv.append(robot_view_sigma(q.uncertainty, size))
                 corners.append(q.uncertainty.corner_mean)
             for f in q.findings:
-                if f.code in ("column_offset", "row_offset"):
-                    shifts.append(float(f.message.split("by ")[-1].split(" px")[0]))
+                if f.code in ("column_offset", "row_offset", "shifted_part"):
+                    shifts.append(f"{f.code} {f.severity} ({f.message.split('Leaving it out moves')[-1][-60:]})")
             if q.verdict == "bad":
                 bad.append((k, len(sel), [f"{f.code}: {f.message[:90]}" for f in q.findings if f.severity == "bad"]))
             if k == 0:
@@ -136,13 +136,14 @@ def main() -> None:
               f"max {rv_a.max():.2f}")
         print(f"    image-corner 1-sigma px: median {np.nanmedian(c_a):.2f}, 95 % {np.nanquantile(c_a, 0.95):.2f}, "
               f"max {np.nanmax(c_a):.2f}")
-        print(f"    line offsets named on clean sets: {len(shifts)}; their robot-view shift px: "
-              f"{', '.join(f'{s:.3f}' for s in sorted(shifts)) or '-'}")
+        print(f"    line offsets and shifted parts named on clean sets: {len(shifts)}")
+        for s in shifts:
+            print(f"      {s}")
         for k, n, why in bad:
             print(f"    BAD set {k} ({n} views): {why}")
     print("\n2. sensitivity: planted defect -> named in n of m random 10-view subsets (bad: verdict 'bad')")
     obj_all, img_all, size = data["right"]
-    cases = [("shifted lower half of one view", "view", [0.1, 0.2, 0.3, 0.5, 1.0]),
+    cases = [("shifted lower half of one view (view 3)", "view", [0.1, 0.2, 0.3, 0.5, 1.0]),
              ("bent column 0 (5 views)", "column", [0.1, 0.2, 0.3, 0.5, 1.0]),
              ("displaced corner (column 2, row 2)", "corner", [0.2, 0.3, 0.5, 1.0, 2.0])]
     for title, kind, sizes in cases:

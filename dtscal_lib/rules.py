@@ -70,6 +70,11 @@ __all__ = ["Case", "RULES", "run_rules", "residuals", "residuals_of", "grid_indi
 #: (tests/test_verdict_real.py checks it); OpenCV's real photographs, 25 random 4-5-view subsets per camera, name
 #: a warp (doubtful, never bad) in 2 (left) and 3 (right): a real print is not perfectly flat either
 MIN_WARP_VIEWS = 4
+#: a step between two grid lines of one view is named above this many standard errors and this many times the
+#: corner noise. Measured on OpenCV's real photographs (benchmarks/bench_verdict_subsets.py prints it): clean
+#: views reach 6.8 (left) and 4.8 (right); a lower half shifted by 0.3 px stands at 4.7-8.5, by 0.5 px at 8.9-12.8
+SEAM_Z = 8.0
+SEAM_NOISE_FACTOR = 3.0
 #: no detector measures corners of an 8-bit image much better than this (pixels, per coordinate);
 #: the noise used in the ratios never goes below it (exact synthetic points would divide by 0)
 NOISE_FLOOR_PX = 0.01
@@ -670,6 +675,58 @@ def rule_outlier_views(c: Case) -> None:
             f"drop view(s) {_list(bad_views)} (a wrong or blurred detection) and calibrate again", bad_views))
 
 
+def _seams(obj, res, noise) -> list[tuple[float, int, int, float, int]]:
+    """Per view, the strongest step between two neighbouring grid lines: ``(z, axis, line, size px, corners)``.
+
+    A part of a view shifted against the rest (the rows below ``line`` moved, a detector that jumped, a frame
+    torn by a rolling shutter) is a step in the residuals between lines ``line`` and ``line + 1``; the pose and
+    the lens absorb smooth patterns, not a step. Across each boundary, per line through it, the third difference
+    ``e[l-1] - 3 e[l] + 3 e[l+1] - e[l+2]`` of the residuals is twice the step and nearly 0 for anything smooth;
+    its mean over the ``m`` lines through the boundary has the standard deviation ``noise sqrt(20 / m)`` per
+    coordinate under the noise model, so ``z = |mean| / (noise sqrt(20 / m))``.
+    """
+    out = []
+    for o, e in zip(obj, res):
+        g = grid_indices(o)
+        P = np.full((g[:, 1].max() + 1, g[:, 0].max() + 1, 2), np.nan)
+        P[g[:, 1], g[:, 0]] = e
+        best = (0.0, 0, 0, 0.0, 0)
+        for axis, Q in ((1, P), (0, P.transpose(1, 0, 2))):  # rows (a step between rows), then columns
+            for line in range(1, Q.shape[0] - 2):
+                T = Q[line - 1] - 3 * Q[line] + 3 * Q[line + 1] - Q[line + 2]
+                T = T[np.all(np.isfinite(T), axis=1)]
+                if len(T) < 3:
+                    continue
+                m = T.mean(axis=0)
+                z = float(np.linalg.norm(m) / (noise * np.sqrt(20.0 / len(T))))
+                if z > best[0]:
+                    best = (z, axis, line, float(np.linalg.norm(m) / 2.0), len(T))
+        out.append(best)
+    return out
+
+
+def rule_shifted_parts(c: Case) -> None:
+    """A part of a view shifted against the rest of it (a step between two grid lines), named with its view."""
+    if c.lines:  # a bent column or row is a step in many views: named by the line rule
+        return
+    for v, (z, axis, line, size, _) in enumerate(_seams(c.obj, c.res, c.noise)):
+        if z <= SEAM_Z or size <= SEAM_NOISE_FACTOR * c.noise:
+            continue
+        name = ("row", "column")[axis == 0]
+        try:
+            without = c.evidence.refit([o for k, o in enumerate(c.obj) if k != v],
+                                       [p for k, p in enumerate(c.img) if k != v])
+            severity, cost = _robot_cost(robot_view_shift(c.result, without), c.result.image_size)
+        except (DtscalError, cv2.error, np.linalg.LinAlgError):  # too few views left to tell
+            severity, cost = "doubtful", ""
+        message = (f"in view {v} the {name}s after {name} {line} are shifted by {size:.2f} px against the {name}s up "
+                   f"to it ({z:.0f} standard errors; corner noise {c.noise:.3f} px): a part of the view moved (a "
+                   "detector that jumped, a frame torn by motion), not noise")
+        c.findings.append(Finding(
+            "shifted_part", severity, f"{message}. {cost}" if cost else message,
+            f"drop view {v} or re-detect it; look at {name}s {line} and {line + 1} on that image", [v]))
+
+
 def rule_line_offsets(c: Case) -> None:
     """A column or row of corners offset the same way in many views; it then explains the residual, so the
     fit rule's unexplained residual becomes a note."""
@@ -796,6 +853,7 @@ RULES: tuple[tuple[str, Callable[[Case], None]], ...] = (
     ("line_offsets", rule_line_offsets),
     ("radial", rule_radial),
     ("outlier_corners", rule_outlier_corners),
+    ("shifted_parts", rule_shifted_parts),
     ("neighbour_correlation", rule_neighbour_correlation),
     ("few_views", rule_few_views),
     ("parallel_views", rule_parallel_views),
