@@ -50,7 +50,6 @@ from .limits import (
 from .uncertainty import (
     REGION_NAMES,
     UncertaintyMap,
-    _dist_idx,
     _need_observations,
     _projection_jacobian,
     _uncertainty_inputs,
@@ -168,7 +167,7 @@ def corner_noise(object_points, image_points) -> tuple[float, int]:
     return float(1.4826 * np.median(np.abs(e)) / _RING_GAIN), len(e)
 
 
-def _board_axis_jacobians(fit, obj_list) -> list[np.ndarray]:
+def _board_axis_jacobians(fit, obj_list, dist_idx) -> list[np.ndarray]:
     """Per view (N_i, 2, 2) ``d pixel / d (board x, board y)`` at each board point, through the fitted camera."""
     counts = [len(o) for o in obj_list]
     view = np.repeat(np.arange(len(obj_list)), counts)
@@ -176,7 +175,7 @@ def _board_axis_jacobians(fit, obj_list) -> list[np.ndarray]:
     R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
     Rv = R[view]
     P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
-    _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, _dist_idx(fit))
+    _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, dist_idx)
     return np.split(np.matmul(dqdP, Rv[:, :, :2]), np.cumsum(counts)[:-1])
 
 
@@ -202,10 +201,10 @@ def _line_means(obj_list, comps):
     return out
 
 
-def _line_offsets(fit, obj_list, res, noise) -> dict[tuple[int, int], dict[int, float]]:
+def _line_offsets(fit, obj_list, res, noise, dist_idx) -> dict[tuple[int, int], dict[int, float]]:
     """``{(axis, line): {view: mean offset px}}`` for the grid columns (axis 0) and rows (axis 1) whose
     residuals along the board's axis share one offset in at least ``OFFSET_VIEW_SHARE`` of the views."""
-    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list), res)]
+    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list, dist_idx), res)]
     offsets: dict[tuple[int, int], dict[int, float]] = {}
     for key, parts in _line_means(obj_list, comps).items():
         for views, m, count in parts:
@@ -215,7 +214,7 @@ def _line_offsets(fit, obj_list, res, noise) -> dict[tuple[int, int], dict[int, 
     return {k: d for k, d in offsets.items() if len(d) >= max(2, OFFSET_VIEW_SHARE * len(res))}
 
 
-def _without_line(refit, obj_list, img_list, axis: int, line: int):
+def _without_line(refit, obj_list, img_list, axis: int, line: int, dist_idx):
     """Re-calibrate without one grid column/row; returns the fit and, per view, that line's mean offset."""
     keep = [grid_indices(o)[:, axis] != line for o in obj_list]
     try:
@@ -223,12 +222,12 @@ def _without_line(refit, obj_list, img_list, axis: int, line: int):
     except (DtscalError, cv2.error, np.linalg.LinAlgError):  # e.g. too few points left in a view
         return None, None
     res = residuals_of(fit, obj_list, img_list)
-    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list), res)]
+    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list, dist_idx), res)]
     means = np.array([float(c[~k, axis].mean()) for c, k in zip(comps, keep)])
     return fit, means
 
 
-def _offset_findings(refit, result, obj_list, img_list, res, noise, rounds: int = 2) -> list[Finding]:
+def _offset_findings(refit, result, obj_list, img_list, res, noise, dist_idx, rounds: int = 2) -> list[Finding]:
     """Columns or rows of corners offset the same way in many views, located by leaving each suspect out.
 
     The residuals of the full fit smear one bad column over its neighbours (the camera absorbs part
@@ -240,14 +239,14 @@ def _offset_findings(refit, result, obj_list, img_list, res, noise, rounds: int 
     names = ("column", "row")
     first = result
     for _ in range(rounds):
-        flagged = _line_offsets(result, obj_list, res, noise)
+        flagged = _line_offsets(result, obj_list, res, noise, dist_idx)
         if not flagged:
             break
         size = {k: float(np.median(np.abs(list(d.values())))) for k, d in flagged.items()}
         top = max(size.values())
         best = None
         for axis, line in [k for k in flagged if size[k] >= 0.5 * top]:  # the strongest suspects only
-            fit, means = _without_line(refit, obj_list, img_list, axis, line)
+            fit, means = _without_line(refit, obj_list, img_list, axis, line, dist_idx)
             if fit is not None and (best is None or fit.sigma < best[2].sigma):
                 best = (axis, line, fit, means)
         if best is None:
@@ -518,7 +517,7 @@ def leave_out_outlier_corners(result, evidence: Evidence):
     noise_raw, _ = corner_noise(obj, img)
     noise = max(noise_raw, NOISE_FLOOR_PX) if np.isfinite(noise_raw) else max(result.sigma, NOISE_FLOOR_PX)
     if (any(f.code == "fit" for f in _fit_findings(result, noise)[0])
-            or _offset_findings(evidence.refit, result, obj, img, res, noise)):
+            or _offset_findings(evidence.refit, result, obj, img, res, noise, evidence.dist_indices)):
         return result
     fit.left_out_corners = list(result.left_out_corners) + left
     return fit
@@ -627,13 +626,13 @@ def prepare(result, evidence: Evidence, *, uncertainty: bool = True, distance: f
     if uncertainty and result.model in KIT_SOLVER_MODELS and evidence.blocks is not None:
         try:
             cov = _uncertainty_inputs(evidence.blocks)
-            umap = uncertainty_map(result, distance=distance, cov=cov)
+            umap = uncertainty_map(result, distance=distance, cov=cov, dist_idx=evidence.dist_indices)
         except np.linalg.LinAlgError:
             umap = None
     if umap is not None:
         help_region = umap.worst_region()
         try:
-            cons = consequences(result, umap=umap, cov=cov)
+            cons = consequences(result, umap=umap, cov=cov, dist_idx=evidence.dist_indices)
         except (np.linalg.LinAlgError, DtscalError):
             cons = None
     else:
@@ -730,7 +729,7 @@ def rule_shifted_parts(c: Case) -> None:
 def rule_line_offsets(c: Case) -> None:
     """A column or row of corners offset the same way in many views; it then explains the residual, so the
     fit rule's unexplained residual becomes a note."""
-    c.lines = _offset_findings(c.evidence.refit, c.result, c.obj, c.img, c.res, c.noise)
+    c.lines = _offset_findings(c.evidence.refit, c.result, c.obj, c.img, c.res, c.noise, c.evidence.dist_indices)
     c.findings += c.lines
     if c.lines:
         for f in [f for f in c.findings if f.code == "unexplained_fit"]:
