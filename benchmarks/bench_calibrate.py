@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -92,14 +93,40 @@ def run(repeats: int) -> dict:
         # the richer-model test of the verdict (dtscal_lib.richer: k3, OpenCV's rational, mrcal's board warp),
         # which the verdict runs only when the residual is above fit_ratio_doubtful x the corner noise: here
         # forced, to time the worst case (issue 21: CALIBRATE with it at most 0.2x cv2.calibrateCamera)
-        from dtscal_lib import quality
+        from dtscal_lib import rules
+        from dtscal_lib.result import evidence
 
         def richer():
-            return quality._richer_fits(res)  # every candidate: the worst case (a finer lens model explains)
+            return rules._richer_fits(res)  # every candidate: the worst case (a finer lens model explains)
         t_richer = median_time(richer, repeats=repeats, warmup=1)
         out["richer"] = {"median_s": t_richer, "ratio_to_opencv": t_richer / t_cv,
                          "with_calibrate_ratio": (t_ours + t_richer) / t_cv,
                          "meets_target": (t_ours + t_richer) / t_cv <= RICHER_MAX_RATIO}
+        # the whole verdict step of the session (issue 31: calibration including the verdict <= 0.2x OpenCV),
+        # and where its time goes: the evidence (normal equations), the preparation (residuals, corner noise,
+        # uncertainty map, consequences) and each rule
+        t_ev = median_time(lambda: evidence(res), repeats=repeats, warmup=1)
+        ev = evidence(res)
+        t_prep = median_time(lambda: rules.prepare(res, ev), repeats=repeats, warmup=1)
+        case = rules.prepare(res, ev)
+        parts = {"evidence": t_ev, "prepare": t_prep}
+        for name, rule in rules.RULES:
+            def one(rule=rule):
+                c = rules.Case(**{k: getattr(case, k) for k in ("result", "evidence", "obj", "img", "res", "noise",
+                                                                  "n_noise", "umap", "cov", "cons", "counts",
+                                                                  "help_region")})
+                for n2, r2 in rules.RULES:
+                    if n2 == name:
+                        break
+                    r2(c)
+                t0 = time.perf_counter()
+                rule(c)
+                return time.perf_counter() - t0
+            parts[f"rule {name}"] = float(np.median([one() for _ in range(max(1, repeats))]))
+        t_verdict = sum(parts.values())
+        out["verdict"] = {"median_s": t_verdict, "parts_s": parts,
+                          "with_calibrate_ratio": (t_ours + t_verdict) / t_cv,
+                          "meets_target": (t_ours + t_verdict) / t_cv <= RICHER_MAX_RATIO}
     return out
 
 
@@ -119,6 +146,13 @@ def print_report(r: dict) -> None:
         print(f"{'richer-model test':24s} {v['median_s'] * 1e3:9.1f} ms {v['ratio_to_opencv']:10.2f}x   "
               f"(calibrate + it: {v['with_calibrate_ratio']:.2f}x OpenCV, target <= {RICHER_MAX_RATIO}x: "
               f"{'ok' if v['meets_target'] else 'MISSED'})")
+    if "verdict" in r:
+        v = r["verdict"]
+        print(f"{'the verdict step':24s} {v['median_s'] * 1e3:9.1f} ms   (calibrate + verdict: "
+              f"{v['with_calibrate_ratio']:.2f}x OpenCV, target <= {RICHER_MAX_RATIO}x: "
+              f"{'ok' if v['meets_target'] else 'MISSED'})")
+        print("  where the verdict's time goes: " + ", ".join(
+            f"{k} {t * 1e3:.1f} ms" for k, t in sorted(v["parts_s"].items(), key=lambda kv: -kv[1]) if t >= 5e-4))
     if "dtscal" in r:
         mark = "ok" if r["dtscal"]["meets_target"] else "MISSED"
         print(f"target: dtscal calibrate() < {r['target_s']} s: {mark}")

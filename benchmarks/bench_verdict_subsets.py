@@ -12,9 +12,9 @@ Printed:
    row offset named on a clean subset, the projection shift its removal makes where the robot looks
    (``robot_shift``): the data behind ``robot_view_sigma_doubtful``, ``robot_view_sigma_bad`` and
    ``robot_shift_bad`` (``dtscal_lib.limits``). None may be "bad".
-2. the sensitivity table: a planted defect (a shifted lower half of one view; a bent column, column 0 moved
-   outwards in 5 of the views; one displaced corner) of each size, named in n of m subsets of 10 views, and
-   how often the verdict is "bad".
+2. the sensitivity table: a planted defect (a shifted lower half of one view, cut along a grid line or across
+   it; a bent column, column 0 moved outwards in 5 of the views; one displaced corner, column 2 row 2) of each
+   size, named in n of m subsets of 10 views of the right set, and how often the verdict is "bad".
 
 Run::
 
@@ -55,10 +55,12 @@ def judge(obj, img, size):
     return res, assess_quality(res)
 
 
-def shift_lower_half(obj, img, view, px):
+def shift_lower_half(obj, img, view, px, by_grid=True):
+    """The lower half of one view moved ``px`` to the right: the board's rows 3-5 (a step along a grid line), or
+    (``by_grid=False``) the corners below the view's median pixel row (a cut across the grid when it is tilted)."""
     img = [p.copy() for p in img]
     p = img[view]
-    lower = p[:, 1] > np.median(p[:, 1])
+    lower = grid_indices(obj[view])[:, 1] >= 3 if by_grid else p[:, 1] > np.median(p[:, 1])
     p[lower, 0] += px
     return img
 
@@ -90,7 +92,7 @@ def named(q, kind: str, view=None) -> bool:
     if isinstance(q, str):
         return False
     for f in q.findings:
-        if kind == "view" and f.code in ("outlier_views", "outlier_corners") and view in f.views:
+        if kind == "view" and f.code in ("shifted_part", "outlier_views") and view in f.views:
             return True
         if kind == "column" and f.code == "column_offset":
             return True
@@ -103,7 +105,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--subsets", type=int, default=40)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--sizes", type=int, default=6, help="planted subsets per defect size")
+    ap.add_argument("--sizes", type=int, default=8, help="planted subsets per defect size")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     data = {side: views(side) for side in ("left", "right")}
@@ -123,8 +125,8 @@ def main() -> None:
                 rv.append(robot_view_sigma(q.uncertainty, size))
                 corners.append(q.uncertainty.corner_mean)
             for f in q.findings:
-                if f.code in ("column_offset", "row_offset"):
-                    shifts.append(float(f.message.split("by ")[-1].split(" px")[0]))
+                if f.code in ("column_offset", "row_offset", "shifted_part"):
+                    shifts.append(f"{f.code} {f.severity} ({f.message.split('Leaving it out moves')[-1][-60:]})")
             if q.verdict == "bad":
                 bad.append((k, len(sel), [f"{f.code}: {f.message[:90]}" for f in q.findings if f.severity == "bad"]))
             if k == 0:
@@ -136,13 +138,15 @@ def main() -> None:
               f"max {rv_a.max():.2f}")
         print(f"    image-corner 1-sigma px: median {np.nanmedian(c_a):.2f}, 95 % {np.nanquantile(c_a, 0.95):.2f}, "
               f"max {np.nanmax(c_a):.2f}")
-        print(f"    line offsets named on clean sets: {len(shifts)}; their robot-view shift px: "
-              f"{', '.join(f'{s:.3f}' for s in sorted(shifts)) or '-'}")
+        print(f"    line offsets and shifted parts named on clean sets: {len(shifts)}")
+        for s in shifts:
+            print(f"      {s}")
         for k, n, why in bad:
             print(f"    BAD set {k} ({n} views): {why}")
     print("\n2. sensitivity: planted defect -> named in n of m random 10-view subsets (bad: verdict 'bad')")
     obj_all, img_all, size = data["right"]
-    cases = [("shifted lower half of one view", "view", [0.1, 0.2, 0.3, 0.5, 1.0]),
+    cases = [("shifted lower half of one view (view 3): the board's rows 3-5", "view", [0.2, 0.3, 0.5, 0.7, 1.0]),
+             ("shifted lower half of one view (view 3): below its median pixel row", "cut", [0.3, 0.5, 1.0, 1.5, 2.0]),
              ("bent column 0 (5 views)", "column", [0.1, 0.2, 0.3, 0.5, 1.0]),
              ("displaced corner (column 2, row 2)", "corner", [0.2, 0.3, 0.5, 1.0, 2.0])]
     for title, kind, sizes in cases:
@@ -153,14 +157,14 @@ def main() -> None:
                 sel = sorted(rng.choice(len(obj_all), 10, replace=False))
                 obj = [obj_all[i] for i in sel]
                 img = [img_all[i] for i in sel]
-                if kind == "view":
-                    img = shift_lower_half(obj, img, 3, px)
+                if kind in ("view", "cut"):
+                    img = shift_lower_half(obj, img, 3, px, by_grid=kind == "view")
                 elif kind == "column":
                     img = bend_column(obj, img, {0, 2, 4, 6, 8}, px)
                 else:
                     img = move_corner(obj, img, 3, px)
                 res, q = judge(obj, img, size)
-                hits += named(q, kind, 3)
+                hits += named(q, "view" if kind == "cut" else kind, 3)
                 bads += (not isinstance(q, str)) and q.verdict == "bad"
             print(f"    {px:4.1f} px: named {hits} of {args.sizes}, bad {bads} of {args.sizes}")
     _ = (calibrate, robot_view_shift)

@@ -213,7 +213,8 @@ def _sigma_of(source, pixels: np.ndarray) -> np.ndarray | None:
         # what the views disagree on (on data/real 1.3-2.6x the noise model, docs/uncertainty.md), and "within its
         # uncertainty" must not call that a change of the camera
         cov = (source.normal_blocks(), source.intrinsic_covariance())
-        return worst_direction_sigma(projection_uncertainty(source, pixels, distance=np.inf, cov=cov))
+        return worst_direction_sigma(projection_uncertainty(source, pixels, distance=np.inf, cov=cov,
+                                                            dist_idx=source.dist_indices))
     return None
 
 

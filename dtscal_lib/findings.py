@@ -70,11 +70,14 @@ class Evidence:
 
     blocks : the normal equations at the solution (:class:`~dtscal_lib.covariance.NormalBlocks`), for the
         projection uncertainty; None for OpenCV's models and when not asked for
+    dist_indices : indices into ``[k1, k2, p1, p2, k3]`` of the distortion terms the result estimated (and
+        every refit)
     tilt_spread_deg : largest angle between a board normal and their mean (degrees)
     refit : ``refit(object_points, image_points) -> result``: calibrate other views the same way (the
         checks that leave a column, a row or single corners out)
     """
 
     blocks: Any
+    dist_indices: list[int]
     tilt_spread_deg: float
     refit: Callable[[list, list], Any]

@@ -177,4 +177,5 @@ def evidence(result, *, blocks: bool = True) -> Evidence:
     projection uncertainty needs them); OpenCV's models have none."""
     _need_views(result)
     nb = lsq.normal_blocks(result) if blocks and result.model in KIT_SOLVER_MODELS else None
-    return Evidence(blocks=nb, tilt_spread_deg=board_normal_spread(result.rvecs), refit=_refitter(result))
+    return Evidence(blocks=nb, dist_indices=lsq.dist_indices(result.model, result.std),
+                    tilt_spread_deg=board_normal_spread(result.rvecs), refit=_refitter(result))

@@ -50,7 +50,6 @@ from .limits import (
 from .uncertainty import (
     REGION_NAMES,
     UncertaintyMap,
-    _dist_idx,
     _need_observations,
     _projection_jacobian,
     _uncertainty_inputs,
@@ -70,6 +69,11 @@ __all__ = ["Case", "RULES", "run_rules", "residuals", "residuals_of", "grid_indi
 #: (tests/test_verdict_real.py checks it); OpenCV's real photographs, 25 random 4-5-view subsets per camera, name
 #: a warp (doubtful, never bad) in 2 (left) and 3 (right): a real print is not perfectly flat either
 MIN_WARP_VIEWS = 4
+#: a step between two grid lines of one view is named above this many standard errors and this many times the
+#: corner noise. Measured on OpenCV's real photographs (benchmarks/bench_verdict_subsets.py prints it): clean
+#: views reach 6.8 (left) and 4.8 (right); a lower half shifted by 0.3 px stands at 4.7-8.5, by 0.5 px at 8.9-12.8
+SEAM_Z = 8.0
+SEAM_NOISE_FACTOR = 3.0
 #: no detector measures corners of an 8-bit image much better than this (pixels, per coordinate);
 #: the noise used in the ratios never goes below it (exact synthetic points would divide by 0)
 NOISE_FLOOR_PX = 0.01
@@ -163,7 +167,7 @@ def corner_noise(object_points, image_points) -> tuple[float, int]:
     return float(1.4826 * np.median(np.abs(e)) / _RING_GAIN), len(e)
 
 
-def _board_axis_jacobians(fit, obj_list) -> list[np.ndarray]:
+def _board_axis_jacobians(fit, obj_list, dist_idx) -> list[np.ndarray]:
     """Per view (N_i, 2, 2) ``d pixel / d (board x, board y)`` at each board point, through the fitted camera."""
     counts = [len(o) for o in obj_list]
     view = np.repeat(np.arange(len(obj_list)), counts)
@@ -171,7 +175,7 @@ def _board_axis_jacobians(fit, obj_list) -> list[np.ndarray]:
     R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
     Rv = R[view]
     P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
-    _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, _dist_idx(fit))
+    _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, dist_idx)
     return np.split(np.matmul(dqdP, Rv[:, :, :2]), np.cumsum(counts)[:-1])
 
 
@@ -197,10 +201,10 @@ def _line_means(obj_list, comps):
     return out
 
 
-def _line_offsets(fit, obj_list, res, noise) -> dict[tuple[int, int], dict[int, float]]:
+def _line_offsets(fit, obj_list, res, noise, dist_idx) -> dict[tuple[int, int], dict[int, float]]:
     """``{(axis, line): {view: mean offset px}}`` for the grid columns (axis 0) and rows (axis 1) whose
     residuals along the board's axis share one offset in at least ``OFFSET_VIEW_SHARE`` of the views."""
-    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list), res)]
+    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list, dist_idx), res)]
     offsets: dict[tuple[int, int], dict[int, float]] = {}
     for key, parts in _line_means(obj_list, comps).items():
         for views, m, count in parts:
@@ -210,7 +214,7 @@ def _line_offsets(fit, obj_list, res, noise) -> dict[tuple[int, int], dict[int, 
     return {k: d for k, d in offsets.items() if len(d) >= max(2, OFFSET_VIEW_SHARE * len(res))}
 
 
-def _without_line(refit, obj_list, img_list, axis: int, line: int):
+def _without_line(refit, obj_list, img_list, axis: int, line: int, dist_idx):
     """Re-calibrate without one grid column/row; returns the fit and, per view, that line's mean offset."""
     keep = [grid_indices(o)[:, axis] != line for o in obj_list]
     try:
@@ -218,12 +222,12 @@ def _without_line(refit, obj_list, img_list, axis: int, line: int):
     except (DtscalError, cv2.error, np.linalg.LinAlgError):  # e.g. too few points left in a view
         return None, None
     res = residuals_of(fit, obj_list, img_list)
-    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list), res)]
+    comps = [_board_axis_components(J, e) for J, e in zip(_board_axis_jacobians(fit, obj_list, dist_idx), res)]
     means = np.array([float(c[~k, axis].mean()) for c, k in zip(comps, keep)])
     return fit, means
 
 
-def _offset_findings(refit, result, obj_list, img_list, res, noise, rounds: int = 2) -> list[Finding]:
+def _offset_findings(refit, result, obj_list, img_list, res, noise, dist_idx, rounds: int = 2) -> list[Finding]:
     """Columns or rows of corners offset the same way in many views, located by leaving each suspect out.
 
     The residuals of the full fit smear one bad column over its neighbours (the camera absorbs part
@@ -235,14 +239,14 @@ def _offset_findings(refit, result, obj_list, img_list, res, noise, rounds: int 
     names = ("column", "row")
     first = result
     for _ in range(rounds):
-        flagged = _line_offsets(result, obj_list, res, noise)
+        flagged = _line_offsets(result, obj_list, res, noise, dist_idx)
         if not flagged:
             break
         size = {k: float(np.median(np.abs(list(d.values())))) for k, d in flagged.items()}
         top = max(size.values())
         best = None
         for axis, line in [k for k in flagged if size[k] >= 0.5 * top]:  # the strongest suspects only
-            fit, means = _without_line(refit, obj_list, img_list, axis, line)
+            fit, means = _without_line(refit, obj_list, img_list, axis, line, dist_idx)
             if fit is not None and (best is None or fit.sigma < best[2].sigma):
                 best = (axis, line, fit, means)
         if best is None:
@@ -513,7 +517,7 @@ def leave_out_outlier_corners(result, evidence: Evidence):
     noise_raw, _ = corner_noise(obj, img)
     noise = max(noise_raw, NOISE_FLOOR_PX) if np.isfinite(noise_raw) else max(result.sigma, NOISE_FLOOR_PX)
     if (any(f.code == "fit" for f in _fit_findings(result, noise)[0])
-            or _offset_findings(evidence.refit, result, obj, img, res, noise)):
+            or _offset_findings(evidence.refit, result, obj, img, res, noise, evidence.dist_indices)):
         return result
     fit.left_out_corners = list(result.left_out_corners) + left
     return fit
@@ -622,13 +626,13 @@ def prepare(result, evidence: Evidence, *, uncertainty: bool = True, distance: f
     if uncertainty and result.model in KIT_SOLVER_MODELS and evidence.blocks is not None:
         try:
             cov = _uncertainty_inputs(evidence.blocks)
-            umap = uncertainty_map(result, distance=distance, cov=cov)
+            umap = uncertainty_map(result, distance=distance, cov=cov, dist_idx=evidence.dist_indices)
         except np.linalg.LinAlgError:
             umap = None
     if umap is not None:
         help_region = umap.worst_region()
         try:
-            cons = consequences(result, umap=umap, cov=cov)
+            cons = consequences(result, umap=umap, cov=cov, dist_idx=evidence.dist_indices)
         except (np.linalg.LinAlgError, DtscalError):
             cons = None
     else:
@@ -670,10 +674,62 @@ def rule_outlier_views(c: Case) -> None:
             f"drop view(s) {_list(bad_views)} (a wrong or blurred detection) and calibrate again", bad_views))
 
 
+def _seams(obj, res, noise) -> list[tuple[float, int, int, float, int]]:
+    """Per view, the strongest step between two neighbouring grid lines: ``(z, axis, line, size px, corners)``.
+
+    A part of a view shifted against the rest (the rows below ``line`` moved, a detector that jumped, a frame
+    torn by a rolling shutter) is a step in the residuals between lines ``line`` and ``line + 1``; the pose and
+    the lens absorb smooth patterns, not a step. Across each boundary, per line through it, the third difference
+    ``e[l-1] - 3 e[l] + 3 e[l+1] - e[l+2]`` of the residuals is twice the step and nearly 0 for anything smooth;
+    its mean over the ``m`` lines through the boundary has the standard deviation ``noise sqrt(20 / m)`` per
+    coordinate under the noise model, so ``z = |mean| / (noise sqrt(20 / m))``.
+    """
+    out = []
+    for o, e in zip(obj, res):
+        g = grid_indices(o)
+        P = np.full((g[:, 1].max() + 1, g[:, 0].max() + 1, 2), np.nan)
+        P[g[:, 1], g[:, 0]] = e
+        best = (0.0, 0, 0, 0.0, 0)
+        for axis, Q in ((1, P), (0, P.transpose(1, 0, 2))):  # rows (a step between rows), then columns
+            for line in range(1, Q.shape[0] - 2):
+                T = Q[line - 1] - 3 * Q[line] + 3 * Q[line + 1] - Q[line + 2]
+                T = T[np.all(np.isfinite(T), axis=1)]
+                if len(T) < 3:
+                    continue
+                m = T.mean(axis=0)
+                z = float(np.linalg.norm(m) / (noise * np.sqrt(20.0 / len(T))))
+                if z > best[0]:
+                    best = (z, axis, line, float(np.linalg.norm(m) / 2.0), len(T))
+        out.append(best)
+    return out
+
+
+def rule_shifted_parts(c: Case) -> None:
+    """A part of a view shifted against the rest of it (a step between two grid lines), named with its view."""
+    if c.lines:  # a bent column or row is a step in many views: named by the line rule
+        return
+    for v, (z, axis, line, size, _) in enumerate(_seams(c.obj, c.res, c.noise)):
+        if z <= SEAM_Z or size <= SEAM_NOISE_FACTOR * c.noise:
+            continue
+        name = ("row", "column")[axis == 0]
+        try:
+            without = c.evidence.refit([o for k, o in enumerate(c.obj) if k != v],
+                                       [p for k, p in enumerate(c.img) if k != v])
+            severity, cost = _robot_cost(robot_view_shift(c.result, without), c.result.image_size)
+        except (DtscalError, cv2.error, np.linalg.LinAlgError):  # too few views left to tell
+            severity, cost = "doubtful", ""
+        message = (f"in view {v} the {name}s after {name} {line} are shifted by {size:.2f} px against the {name}s up "
+                   f"to it ({z:.0f} standard errors; corner noise {c.noise:.3f} px): a part of the view moved (a "
+                   "detector that jumped, a frame torn by motion), not noise")
+        c.findings.append(Finding(
+            "shifted_part", severity, f"{message}. {cost}" if cost else message,
+            f"drop view {v} or re-detect it; look at {name}s {line} and {line + 1} on that image", [v]))
+
+
 def rule_line_offsets(c: Case) -> None:
     """A column or row of corners offset the same way in many views; it then explains the residual, so the
     fit rule's unexplained residual becomes a note."""
-    c.lines = _offset_findings(c.evidence.refit, c.result, c.obj, c.img, c.res, c.noise)
+    c.lines = _offset_findings(c.evidence.refit, c.result, c.obj, c.img, c.res, c.noise, c.evidence.dist_indices)
     c.findings += c.lines
     if c.lines:
         for f in [f for f in c.findings if f.code == "unexplained_fit"]:
@@ -796,6 +852,7 @@ RULES: tuple[tuple[str, Callable[[Case], None]], ...] = (
     ("line_offsets", rule_line_offsets),
     ("radial", rule_radial),
     ("outlier_corners", rule_outlier_corners),
+    ("shifted_parts", rule_shifted_parts),
     ("neighbour_correlation", rule_neighbour_correlation),
     ("few_views", rule_few_views),
     ("parallel_views", rule_parallel_views),

@@ -134,7 +134,8 @@ def _rays(result, pix: np.ndarray) -> np.ndarray:
     return ray / np.linalg.norm(ray, axis=1, keepdims=True)
 
 
-def projection_uncertainty(result, pixels, *, distance: float | None = None, cov=None) -> np.ndarray:
+def projection_uncertainty(result, pixels, *, distance: float | None = None, cov=None,
+                           dist_idx: list[int] | None = None) -> np.ndarray:
     """Covariance (M, 2, 2) of the projection of the fixed 3-D points seen at ``pixels``.
 
     The point seen at pixel ``q`` is taken at ``distance`` along its ray (default: the median
@@ -164,7 +165,8 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     ray = _rays(result, pix)
     at_infinity = not np.isfinite(distance)
     P = ray if at_infinity else distance * ray
-    _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew, _dist_idx(result))
+    _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew,
+                                          _dist_idx(result) if dist_idx is None else dist_idx)
     R0, dR0 = rodrigues(result.rvecs)
     W = np.einsum("vkij,vlj->vkil", dR0, R0)  # dR/dr_k R^T, a cross-product matrix [w_k]_x
     omegas = np.stack([W[:, :, 2, 1], W[:, :, 0, 2], W[:, :, 1, 0]], axis=1)  # (V, 3 axis, 3 k)
@@ -179,7 +181,8 @@ def worst_direction_sigma(cov: np.ndarray) -> np.ndarray:
     return np.sqrt(0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b ** 2))
 
 
-def uncertainty_map(result, *, step: int = 20, distance: float | None = None, cov=None) -> UncertaintyMap:
+def uncertainty_map(result, *, step: int = 20, distance: float | None = None, cov=None,
+                    dist_idx: list[int] | None = None) -> UncertaintyMap:
     """:func:`projection_uncertainty` (worst direction) on a grid every ``step`` pixels and at the image corners.
 
     ``cov`` : optional ``(NormalBlocks, intrinsic covariance)`` computed before (:func:`_uncertainty_inputs`)
@@ -191,7 +194,8 @@ def uncertainty_map(result, *, step: int = 20, distance: float | None = None, co
     grid = np.column_stack([np.tile(u, len(v)), np.repeat(v, len(u))])
     cov = _uncertainty_inputs(result.normal_blocks()) if cov is None else cov
     d = float(np.median(np.linalg.norm(result.tvecs, axis=1))) if distance is None else float(distance)
-    s = worst_direction_sigma(projection_uncertainty(result, np.vstack([grid, corners]), distance=d, cov=cov))
+    s = worst_direction_sigma(projection_uncertainty(result, np.vstack([grid, corners]), distance=d, cov=cov,
+                                                        dist_idx=dist_idx))
     return UncertaintyMap(u, v, s[:-4].reshape(len(v), len(u)), corners, s[-4:], d)
 
 
@@ -217,7 +221,7 @@ def _pixel_to_ground(result, pix: np.ndarray) -> np.ndarray:
     return c[:2] + d[:, :2] * (-c[2] / d[:, 2:3])
 
 
-def consequences(result, *, umap: UncertaintyMap | None = None, cov=None) -> dict:
+def consequences(result, *, umap: UncertaintyMap | None = None, cov=None, dist_idx: list[int] | None = None) -> dict:
     """What the calibration's uncertainty means for a Duckiebot's ground projection and image corners.
 
     The camera is put where a Duckiebot's is (:data:`NOMINAL_CAMERA_HEIGHT_M` above the ground,
@@ -240,7 +244,8 @@ def consequences(result, *, umap: UncertaintyMap | None = None, cov=None) -> dic
                "in_image": bool(0 <= q[0] < w and 0 <= q[1] < h),
                "pixel_sigma_px": None, "ground_sigma_cm": None, "forward_sigma_cm": None}
         if row["in_image"]:
-            Sq = projection_uncertainty(result, q[None], distance=float(np.linalg.norm(Pc)), cov=cov)[0]
+            Sq = projection_uncertainty(result, q[None], distance=float(np.linalg.norm(Pc)), cov=cov,
+                                        dist_idx=dist_idx)[0]
             eps = 0.5
             J = np.column_stack([(_pixel_to_ground(result, (q + e)[None]) - _pixel_to_ground(result, (q - e)[None]))[0]
                                  / (2 * eps) for e in (np.array([eps, 0.0]), np.array([0.0, eps]))])

@@ -313,3 +313,13 @@ def test_quality_and_calibration_do_not_import_each_other_both_ways():
     assert not {"calibration", "result"} & imported("quality")
     assert not {"calibration", "quality"} & imported("covariance")
     assert "quality" not in imported("calibration") and "result" in imported("calibration")
+
+
+def test_where_the_robot_looks():
+    """A Duckiebot (landscape frames) acts on the lower half of the image, the ground ahead; the DD24 (portrait
+    frames) on its whole, downward view (dtscal_lib.uncertainty.robot_view: where "bad" is measured)."""
+    from dtscal_lib.uncertainty import robot_view
+
+    pix = np.array([[0.0, 0.0], [639.0, 239.0], [320.0, 240.0], [0.0, 479.0], [639.0, 479.0]])
+    assert robot_view(pix, (640, 480)).tolist() == [False, False, True, True, True]
+    assert robot_view(pix[:, ::-1], (480, 640)).all()

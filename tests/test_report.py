@@ -104,7 +104,7 @@ def test_write_report_writes_the_figures_and_a_page_with_the_verdict(parallel, t
 
 
 def test_warnings_go_to_stderr_and_say_what_to_do(parallel, tmp_path):
-    run = SimpleNamespace(result=parallel, robot="bot", source="test views", samples=3)
+    run = SimpleNamespace(result=parallel, robot="bot", source="test views", samples=3, quality=parallel.quality())
     err = io.StringIO()
     q = report.quality_for_run(run, tmp_path / "r", stream=err)
     lines = err.getvalue().splitlines()
@@ -117,7 +117,7 @@ def test_warnings_go_to_stderr_and_say_what_to_do(parallel, tmp_path):
 def test_no_warning_when_the_verdict_is_good(good):
     res, _ = good
     err = io.StringIO()
-    run = SimpleNamespace(result=res, robot="bot", source="s", samples=res.n_views)
+    run = SimpleNamespace(result=res, robot="bot", source="s", samples=res.n_views, quality=res.quality())
     q = report.quality_for_run(run, None, stream=err)
     assert q.verdict == "good" and err.getvalue() == "" and q.report_path is None
 

@@ -232,6 +232,12 @@ class Walk:
         below = {(a, b) for a, b, _ in self.edges if self.layer(a) == 0 and self.layer(b) == 0}
         return sorted((a, b) for a, b in below if (b, a) in below and a < b)
 
+    def judge_calls_back(self) -> list[tuple[str, str, str]]:
+        """Calls from the judge (quality, rules, uncertainty) into the estimator (calibration, result, lsq,
+        closed_form), except the refit the session handed it (``calibrate``, through ``Evidence.refit``)."""
+        judge, estimator = {"quality", "rules", "uncertainty"}, {"calibration", "result", "lsq", "closed_form"}
+        return [e for e in self.edges if e[0] in judge and e[1] in estimator and e[2] != "calibrate"]
+
     def steps_called_by(self) -> dict[tuple[str, str], set[str]]:
         out: dict = {}
         for caller, callee, fn in self.edges:
@@ -273,6 +279,7 @@ def check_walk(walk: Walk, areas: list[str], steps: list[tuple[str, str]]) -> No
     enters ``areas`` in that order, each once; ``steps`` are called by the session only."""
     assert walk.climbs() == []
     assert walk.callbacks() == []
+    assert walk.judge_calls_back() == []  # the judge gets what it needs passed in (dtscal_lib.result.evidence)
     assert walk.session_walk() == areas
     called = walk.steps_called_by()
     for step in steps:

@@ -93,14 +93,16 @@ def test_board_warp_is_recovered_as_mrcal_defines_it(n_views):
 
 
 def test_a_single_displaced_corner_is_named_left_out_and_recalibrated(real):
+    """Corner 21 of view 3 moved by 2 px: off the grid's diagonal (column 3, row 2 of the 9x6 board, rows of 9), so
+    a column and a row swapped in the words would show (issue 31)."""
     side, res = real
     img = [np.asarray(p, float).reshape(-1, 2).copy() for p in res.image_points]
-    img[3][20] += [2.0 / np.sqrt(2), 2.0 / np.sqrt(2)]  # 2 px
+    img[3][21] += [2.0 / np.sqrt(2), 2.0 / np.sqrt(2)]  # 2 px
     planted = res.refit(res.object_points, img)
     q = planted.quality()
     assert q.verdict in ("doubtful", "bad")
     f = next(f for f in q.findings if f.code == "outlier_corners")
-    assert f.views == [3] and "view 3 corner 20 (column 2, row 2)" in f.message, str(f)
+    assert f.views == [3] and "view 3 corner 21 (column 3, row 2)" in f.message, str(f)
     again = q.without_outlier_corners
     assert again.n_points == planted.n_points - 1
     # without it, the calibration is the clean one again (the planted corner was its only change)
@@ -111,10 +113,27 @@ def test_a_single_displaced_corner_is_named_left_out_and_recalibrated(real):
     # what the command line and the live CALIBRATE run: the corner is left out of the calibration they keep
     kept, dropped = calibrate_without_outlier_views(res.object_points, img, res.image_size, model=res.model)
     assert dropped == [] and kept.n_points == planted.n_points - 1
-    assert [(c["view"], c["corner"], c["column"], c["row"]) for c in kept.left_out_corners] == [(3, 20, 2, 2)]
+    assert [(c["view"], c["corner"], c["column"], c["row"]) for c in kept.left_out_corners] == [(3, 21, 3, 2)]
     np.testing.assert_allclose(kept.K, again.K, rtol=1e-6)
     f = next(f for f in kept.quality().findings if f.code == "outlier_corners")
-    assert "left out" in f.message and "view 3 corner 20 (column 2, row 2)" in f.message, str(f)
+    assert "left out" in f.message and "view 3 corner 21 (column 3, row 2)" in f.message, str(f)
+
+
+def test_a_shifted_part_of_a_view_is_named_with_its_view(real):
+    """The rows of view 5 below row 2 moved 0.6 px to the right (about 9x the corner noise; a detector that jumped,
+    a torn frame): named as a shifted part of view 5, with the step's size and where; the clean set names none.
+    What it costs the robot decides "bad" (rules._robot_cost): leaving the view out moves the robot's view little."""
+    side, res = real
+    assert not any(f.code == "shifted_part" for f in res.quality().findings)
+    img = [np.asarray(p, float).reshape(-1, 2).copy() for p in res.image_points]
+    lower = np.arange(len(img[5])) >= 3 * 9  # rows 3-5 of the 9x6 board (rows of 9 corners)
+    img[5][lower, 0] += 0.6
+    q = res.refit(res.object_points, img).quality()
+    f = next(f for f in q.findings if f.code == "shifted_part")
+    assert f.views == [5] and "rows after row 2 are shifted by" in f.message, str(f)
+    size = float(f.message.split("shifted by ")[1].split(" px")[0])
+    assert 0.45 < size < 0.75, size  # the step as planted, less what the view's pose absorbs
+    assert f.severity == "doubtful" and "robot looks" in f.message and "drop view 5" in f.advice
 
 
 def test_planted_defects_on_real_photographs_are_named(real):
