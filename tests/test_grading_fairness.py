@@ -305,6 +305,7 @@ PINNED = {
     "04_distortion_rectification__maps_float64_transposed": 10, "05_extrinsic_calibration__from_far_row": 0,
     "05_extrinsic_calibration__camera_H_not_inverted": 0, "05_extrinsic_calibration__camera_height_sign": 0,
     "05_extrinsic_calibration__camera_pitch_radians": 0, "05_extrinsic_calibration__camera_pitch_sign": 0,
+    "02_homography__apply_divides_H_in_place": 18.18, "05_extrinsic_calibration__camera_abs_pitch": 28.46,
 }
 
 
