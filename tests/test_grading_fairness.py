@@ -404,7 +404,7 @@ def test_a_broken_rule_charges_its_function_once_with_the_same_words(path, rules
     charged = {f.strip() for f in re.search(r"# charged: (.*)", src).group(1).split(",")}
     expect = re.search(r"# expect: (.*)", src).group(1).strip()
     res, reports = rules_results[path.stem], _self_checks(path)
-    lost = {f.name for f in res.functions if f.score < f.max_score}
+    lost = {f.name for f in res.functions if f.score < f.max_score and f.status != "missing"}
     assert lost == charged, text(res)  # the function that breaks the rule, and no other (one call, one charge)
     assert {f for f, r in reports.items() if not r.passed} == charged
     assert expect in text(res)

@@ -1,4 +1,4 @@
-# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_exercise_rules.py: the self-check and the
+# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_grading_fairness.py: the self-check and the
 # grader agree on every function (self-check passes <=> full marks); the charged functions lose points in both.
 # rule: the precision contract: camera_height_pitch in float32 is near enough for a loose value check (the
 # self-check's pitch tolerance was 1e-5 deg) but fails the contract, in the self-check and the grader alike
@@ -8,13 +8,6 @@
 import numpy as np
 
 
-def board_ground_points(cols, rows, square, x0, y0):
-    j, i = np.indices((int(rows), int(cols)), dtype=np.float64)
-    return np.column_stack([(x0 + square * j).ravel(), (y0 + square * i).ravel()])
-def pixel_to_ground(H, uv):
-    uv = np.asarray(uv, float).reshape(-1, 2)
-    g = np.column_stack([uv, np.ones(len(uv))]) @ np.asarray(H, float).T
-    return g[:, :2] / g[:, 2:]
 def camera_height_pitch(H, K):
     H, K = np.asarray(H, np.float32), np.asarray(K, np.float32)
     M = np.linalg.solve(K, np.linalg.inv(H))
