@@ -55,6 +55,8 @@ def test_the_sandbox_describes_an_answer_as_the_rule_table_does(value):
     """The grader's words on a returned value come from the sandbox's note; the self-check computes the same."""
     desc = harness._encode(value, harness._Blobs(), np)
     assert desc.get("note", "") == rules.answer_note(value)
+    if isinstance(value, list) and not any(isinstance(v, (np.ndarray, tuple)) for v in value):
+        assert desc["kind"] == "array"  # a nested list of numbers is ONE answer (not "a tuple of three arrays")
 
 
 def test_a_nested_list_is_refused_with_the_same_words_for_every_function():

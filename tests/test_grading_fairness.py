@@ -305,6 +305,7 @@ PINNED = {
     "04_distortion_rectification__maps_float64_transposed": 10, "05_extrinsic_calibration__from_far_row": 0,
     "05_extrinsic_calibration__camera_H_not_inverted": 0, "05_extrinsic_calibration__camera_height_sign": 0,
     "05_extrinsic_calibration__camera_pitch_radians": 0, "05_extrinsic_calibration__camera_pitch_sign": 0,
+    "02_homography__apply_divides_H_in_place": 18.18, "05_extrinsic_calibration__camera_abs_pitch": 28.46,
 }
 
 
@@ -403,7 +404,7 @@ def test_a_broken_rule_charges_its_function_once_with_the_same_words(path, rules
     charged = {f.strip() for f in re.search(r"# charged: (.*)", src).group(1).split(",")}
     expect = re.search(r"# expect: (.*)", src).group(1).strip()
     res, reports = rules_results[path.stem], _self_checks(path)
-    lost = {f.name for f in res.functions if f.score < f.max_score}
+    lost = {f.name for f in res.functions if f.score < f.max_score and f.status != "missing"}
     assert lost == charged, text(res)  # the function that breaks the rule, and no other (one call, one charge)
     assert {f for f, r in reports.items() if not r.passed} == charged
     assert expect in text(res)

@@ -83,7 +83,9 @@ OUTSIDE_RULE = ("teaching", "grading")
 
 
 def _all_imports(path: Path, root: Path) -> set[str]:
-    rel = path.relative_to(root).with_suffix("").parts
+    """Every module ``path`` imports, at any depth (relative imports resolved inside ``root``, the library;
+    a file outside it, such as the hidden cases ``grading/cases.py``, has none to resolve)."""
+    rel = path.relative_to(root).with_suffix("").parts if root in path.parents else ("",)
     pkg = ["dtscal_lib", *rel[:-1]]
     out = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
@@ -173,27 +175,12 @@ def _wing_files(root: Path) -> dict[str, list[Path]]:
     return files
 
 
-def _imports_anywhere(path: Path, root: Path) -> set[str]:
-    """Every module ``path`` imports, at any depth (relative imports resolved inside ``dtscal_lib``)."""
-    lib = root / "dtscal_lib"
-    if lib in path.parents:
-        return _all_imports(path, lib)
-    out = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.ImportFrom) and not node.level:
-            out.add(node.module or "")
-            out.update(f"{node.module}.{a.name}" for a in node.names)
-        elif isinstance(node, ast.Import):
-            out.update(a.name for a in node.names)
-    return out
-
-
 def _wing_crossings(root: Path) -> dict[str, list[str]]:
     found = {}
     for wing, files in _wing_files(root).items():
         other = next(m for w, m in WINGS.items() if w != wing)
         for path in files:
-            hits = sorted(m for m in _imports_anywhere(path, root) if m == other or m.startswith(other + "."))
+            hits = sorted(m for m in _all_imports(path, root / "dtscal_lib") if m == other or m.startswith(other + "."))
             if hits:
                 found[path.relative_to(root).as_posix()] = hits
     return found

@@ -1,4 +1,4 @@
-# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_exercise_rules.py: the self-check and the
+# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_grading_fairness.py: the self-check and the
 # grader agree on every function (self-check passes <=> full marks); the charged functions lose points in both.
 # rule: cv2.projectPoints computes the exercise
 # charged: project_points

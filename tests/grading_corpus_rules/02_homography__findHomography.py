@@ -1,4 +1,4 @@
-# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_exercise_rules.py: the self-check and the
+# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_grading_fairness.py: the self-check and the
 # grader agree on every function (self-check passes <=> full marks); the charged functions lose points in both.
 # rule: cv2.findHomography computes estimate_homography
 # charged: estimate_homography
@@ -6,12 +6,6 @@
 
 import cv2
 import numpy as np
-
-
-def apply_homography(H, pts):
-    p = np.asarray(pts, float).reshape(-1, 2)
-    q = np.column_stack([p, np.ones(len(p))]) @ np.asarray(H, float).T
-    return q[:, :2] / q[:, 2:]
 
 
 def estimate_homography(src, dst):

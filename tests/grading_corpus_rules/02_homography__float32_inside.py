@@ -1,4 +1,4 @@
-# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_exercise_rules.py: the self-check and the
+# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_grading_fairness.py: the self-check and the
 # grader agree on every function (self-check passes <=> full marks); the charged functions lose points in both.
 # rule: the precision contract: float32 arithmetic inside fails in the self-check and the grader alike
 # charged: estimate_homography
@@ -7,12 +7,6 @@
 import math
 
 import numpy as np
-
-
-def apply_homography(H, pts):
-    p = np.asarray(pts, float).reshape(-1, 2)
-    q = np.column_stack([p, np.ones(len(p))]) @ np.asarray(H, float).T
-    return q[:, :2] / q[:, 2:]
 
 
 def _normalizer(p):

@@ -1,4 +1,4 @@
-# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_exercise_rules.py: the self-check and the
+# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_grading_fairness.py: the self-check and the
 # grader agree on every function (self-check passes <=> full marks); the charged functions lose points in both.
 # rule: cv2.undistortPoints computes undistort_normalized; rectification_maps, through a helper of its own that is
 # not an exercise, calls cv2.projectPoints and is charged for it
@@ -7,16 +7,6 @@
 
 import cv2
 import numpy as np
-
-
-def distort_normalized(xy, dist):
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    k1, k2, p1, p2, k3 = np.asarray(dist, dtype=np.float64).ravel()[:5]
-    x, y = xy[:, 0], xy[:, 1]
-    r2 = x ** 2 + y ** 2
-    radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
-    return np.column_stack([x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x ** 2),
-                            y * radial + p1 * (r2 + 2 * y ** 2) + 2 * p2 * x * y])
 
 
 def undistort_normalized(xy_d, dist):

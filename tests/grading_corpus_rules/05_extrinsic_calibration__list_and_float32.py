@@ -1,4 +1,4 @@
-# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_exercise_rules.py: the self-check and the
+# Corpus of the rule table (dtscal_lib/exercise_rules.py) for tests/test_grading_fairness.py: the self-check and the
 # grader agree on every function (self-check passes <=> full marks); the charged functions lose points in both.
 # rule: a list returned (camera_height_pitch) is refused with the same words as every other function's; float32
 # arithmetic inside pixel_to_ground fails the precision contract
@@ -8,9 +8,6 @@
 import numpy as np
 
 
-def board_ground_points(cols, rows, square, x0, y0):
-    j, i = np.indices((int(rows), int(cols)), dtype=np.float64)
-    return np.column_stack([(x0 + square * j).ravel(), (y0 + square * i).ravel()])
 def pixel_to_ground(H, uv):
     uv = np.asarray(uv, np.float32).reshape(-1, 2)
     g = np.column_stack([uv, np.ones(len(uv), np.float32)]) @ np.asarray(H, np.float32).T
