@@ -41,6 +41,7 @@ from matplotlib.figure import Figure
 
 from .figure import CourseFigure  # the kit's one figure convention: shows itself in a notebook
 
+from . import safe_write
 from .errors import DtscalError
 from .quality import REGION_NAMES, Quality, assess
 
@@ -243,7 +244,8 @@ def write_report(result, directory, quality: Quality | None = None, *, title: st
     q = _q(result, quality)
     for name, (fn, _) in FIGURES.items():
         fig = fn(result, q)
-        fig.savefig(out / name, dpi=100)
+        with safe_write.output(out / name, what="report figure", suffix=".png") as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
     rows = dict(extra or {})
     K = result.K
     rows.update({
@@ -286,7 +288,7 @@ th{{text-align:left;padding-right:1em}} img{{max-width:100%}} figure{{margin:1.5
 </body></html>
 """
     index = out / "index.html"
-    index.write_text(page, encoding="utf-8")
+    safe_write.write_text(index, page, what="report page")
     return index
 
 

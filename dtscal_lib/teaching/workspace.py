@@ -38,6 +38,7 @@ from pathlib import Path
 
 import nbformat
 
+from .. import safe_write
 from ..errors import DtscalError
 from .release import BEGIN_YOURS, END_YOURS
 
@@ -451,8 +452,14 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
             except Exception as exc:  # noqa: BLE001 (a damaged course is the instructor's to fix)
                 raise DtscalError(f"the course notebook {new_path} cannot be read ({type(exc).__name__}); unpack "
                                   "the course again; nothing was changed") from None
-            if not old_path.exists():
+            safe_write.check(ws / BASE / new_path.name, what="course copy of the notebook", through=False)
+            if not old_path.exists() and not old_path.is_symlink():
                 plans.append((new_path.name, new, None))
+                continue
+            try:  # a device, a FIFO or a dangling link in the student's place: never read, never replaced
+                safe_write.check(old_path, what="notebook", through=False)
+            except DtscalError as exc:
+                report.not_carried.append(f"{new_path.name}: {exc}; left as it is")
                 continue
             try:
                 old = nbformat.read(str(old_path), as_version=4)
@@ -494,10 +501,11 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
                         shutil.copy2(old_path, backup_dir / name)
                         report.backups.append(str(backup_dir / name))
             (ws / BASE).mkdir(exist_ok=True)
-            for name, merged, _old in plans:
-                temps.append((_write_temp(ws / name, merged), ws / name))
-                temps.append((_write_temp(ws / BASE / name, nbformat.read(str(root / "notebooks" / name),
-                                                                          as_version=4)), ws / BASE / name))
+            for name, merged, _old in plans:  # a symlinked notebook stays a link: the file it names is updated
+                for final, nb in ((safe_write.real(ws / name), merged),
+                                  (safe_write.real(ws / BASE / name),
+                                   nbformat.read(str(root / "notebooks" / name), as_version=4))):
+                    temps.append((_write_temp(final, nb), final))
         except (OSError, DtscalError) as exc:
             for tmp, _final in temps:
                 tmp.unlink(missing_ok=True)
