@@ -56,9 +56,9 @@ def check(path, *, what: str = "output", through: bool = True) -> str:
     path = Path(path)
     try:
         st = os.stat(path)
-    except FileNotFoundError:
-        return "replace"
     except OSError as exc:
+        if isinstance(exc, FileNotFoundError) and not path.is_symlink():
+            return "replace"
         if path.is_symlink():  # a dangling or looping link: the rename would replace the link itself
             raise DtscalError(f"the {what} {path} is a symbolic link that leads nowhere ({exc.strerror}); "
                               "remove it or give another file name") from None

@@ -47,6 +47,7 @@ def cmd_grade(args) -> int:
         out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment)
         print(f"wrote {out}: upload it as the autograder of a Gradescope programming assignment")
         return 0
+    _check_outputs(args)  # a --csv that is a folder or a disk: refused before the class is graded
     git_notes: dict[str, list[str]] = {}
     if args.roster or args.deadline:  # git hand-in: clone each repository at its commit into a class folder
         import tempfile
@@ -76,6 +77,18 @@ def cmd_grade(args) -> int:
         return _grade_roster(args, r, material)
     finally:
         r.cleanup()  # the members taken from hand-in zips
+
+
+def _check_outputs(args) -> None:
+    """Refuse, before any work, an output that cannot be written (:func:`dtscal_lib.safe_write.check`)."""
+    from pathlib import Path
+
+    from .. import safe_write
+
+    for target, what in ((args.json, "--json file"), (args.csv, "--csv file"),
+                         (args.report and Path(args.report) / "index.html", "class report (--report)")):
+        if target:
+            safe_write.check(target, what=what)
 
 
 def _grade_roster(args, r, material) -> int:
