@@ -82,6 +82,19 @@ def _files(folder: Path) -> list[Path]:
                   and not any(part.startswith(".") or part == "__pycache__" for part in p.relative_to(folder).parts))
 
 
+def same_stem(folders: list[Path], files: list[Path]) -> dict[str, str]:
+    """Names that a class folder's hand-ins share (``alice/`` and ``alice.py``, or ``alice.ipynb`` and
+    ``alice.zip``): ``{stem: "alice/, alice.py"}``. The rule: each such file is its own student, named by
+    the file's whole name (``alice.py``); the folder keeps the bare name. Never merged: one student's
+    work never silently takes the place of another's."""
+    seen: dict[str, list[str]] = {}
+    for d in folders:
+        seen.setdefault(d.name, []).append(d.name + "/")
+    for p in files:
+        seen.setdefault(p.stem, []).append(p.name)
+    return {stem: ", ".join(names) for stem, names in seen.items() if len(names) > 1}
+
+
 def match_by_functions(path: Path) -> str | None:
     """The assignment whose exercise functions ``path`` defines (most of them), or None."""
     try:
@@ -194,9 +207,15 @@ def roster(path, assignment: str | None = None, *, one_student: str | None = Non
             for p in top:  # one student's folder: notebooks named after the assignments
                 add(path.name, p, p.name)
         else:
+            shared = same_stem(subdirs, [p for p in top if p.suffix in (*SUFFIXES, ".zip")])
             for p in top:
                 if p.suffix in (*SUFFIXES, ".zip"):  # one file, one student: named by the file
-                    add(p.stem, p, p.name)
+                    who = p.name if p.stem in shared else p.stem
+                    add(who, p, p.name)
+                    if p.stem in shared:
+                        r.note(who, f"{p.name}: graded as its own student {who!r}: {shared[p.stem]} share the name "
+                                    f"{p.stem!r} (a folder and a file, or two files, are two hand-ins); merge "
+                                    "them by hand if they are one student's")
                 else:
                     r.unplaced.append(f"{p.name}: not a notebook, .py file, hand-in zip or student folder; "
                                       "no student to give it to, not graded")

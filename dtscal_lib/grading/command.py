@@ -52,7 +52,7 @@ def cmd_grade(args) -> int:
     if args.roster or args.deadline:  # git hand-in: clone each repository at its commit into a class folder
         import tempfile
 
-        from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster
+        from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster, zone_given
 
         if not args.roster or args.submission:
             raise DtscalError("--deadline goes with --roster CSV|DIR; --roster replaces the submission argument")
@@ -60,7 +60,8 @@ def cmd_grade(args) -> int:
         entries = read_roster(args.roster)
         class_tmp = tempfile.TemporaryDirectory(prefix="dtscal-roster-class-")  # noqa: F841 (kept until graded)
         if deadline is not None and not args.quiet:
-            print(f"grading {len(entries)} repositories at the {deadline_now_note(deadline)}", file=sys.stderr)
+            print(f"grading {len(entries)} repositories at the "
+                  f"{deadline_now_note(deadline, local=not zone_given(args.deadline))}", file=sys.stderr)
         for co in checkout_roster(entries, class_tmp.name, deadline=deadline):
             git_notes[co.student] = co.notes
         args.submission = class_tmp.name
