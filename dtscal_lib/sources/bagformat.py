@@ -246,7 +246,7 @@ def _read_record(f: BinaryIO) -> tuple[dict[str, bytes], bytes, bool] | None:
     if len(head) < 4:
         raise _Cut()
     (hlen,) = _u32.unpack(head)
-    if hlen == 0:
+    if hlen > _MAX_HEADER or hlen == 0:
         raise _Garbage(f"record header length {hlen}")
     header = f.read(hlen)
     if len(header) < hlen:
