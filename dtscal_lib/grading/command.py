@@ -71,6 +71,9 @@ def cmd_grade(args) -> int:
         raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
     validate_limits(args.wall, args.cpu, args.mem)
     material = Material.load(args.material)
+    from .preflight import check_numpy
+
+    check_numpy()  # numpy that cannot load in the sandbox: refused here, not a class of "grader error"
     r = roster(args.submission, args.assignment, one_student=args.one_student)
     for student, notes in git_notes.items():  # which commit was graded, or why none: first in the row
         r.notes[student] = notes + r.notes.get(student, [])
