@@ -24,7 +24,8 @@ the field.
 Writing is atomic: the new content goes to a temporary file in the same folder, is
 flushed and fsync'ed, and replaces ``<ROBOT>.yaml`` with ``os.replace``. The previous
 ``<ROBOT>.yaml`` is kept as ``<ROBOT>.yaml.bak`` (the last one only). A failed write
-leaves the previous file as it was and removes the temporary file.
+leaves the previous file as it was and removes the temporary file. A target that is a device
+or a FIFO is written through, never replaced (:mod:`dtscal_lib.safe_write`).
 
 Examples
 --------

@@ -22,7 +22,9 @@ Safety: the old notebooks go to a new ``workspace/backups/<stamp>[-N]/`` (never 
 every merged notebook is written to a temporary file first and then renamed over the old one
 (``os.replace``), undone if a later rename fails; a lock file (``workspace/.update.lock``)
 makes a second update wait for the first; every failure raises :class:`DtscalError` with one
-line saying what to do, and leaves the workspace as it was.
+line saying what to do, and leaves the workspace as it was. A notebook that is a device, a FIFO or a
+dangling link is neither read nor replaced (listed as not carried); a symlinked notebook stays a
+link, the file it names is updated (:mod:`dtscal_lib.safe_write`).
 """
 
 from __future__ import annotations
