@@ -618,15 +618,19 @@ def _atomic_write(path: Path, text: str, *, backup: bool = True) -> Path:
     """
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(path)
-    with safe_write.output(path, what="calibration file", fsync=False) as tmp:
-        with open(tmp, "w", encoding="utf-8") as f:  # on disk before the backup is touched
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        if backup and path.is_file():
-            bak = path.with_name(path.name + ".bak")
-            with safe_write.output(bak, what="backup of the calibration file", fsync=False) as tmp_bak:
-                shutil.copy2(path, tmp_bak)
+    try:
+        with safe_write.output(path, what="calibration file", fsync=False) as tmp:
+            with open(tmp, "w", encoding="utf-8") as f:  # on disk before the backup is touched
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            if backup and path.is_file():
+                bak = path.with_name(path.name + ".bak")
+                with safe_write.output(bak, what="backup of the calibration file", fsync=False) as tmp_bak:
+                    shutil.copy2(path, tmp_bak)
+    except DtscalError as exc:  # a target that is no file (a folder where the .bak goes): refused
+        raise CalibrationFileError(f"{path}: could not be written ({exc}); the previous file is "
+                                   "unchanged") from None
     _fsync_dir(path.parent)
     return path
 
