@@ -123,3 +123,21 @@ def test_any_other_layout_keeps_todays_rules(tmp_path):
         assert not any("Canvas" in s for s in r.students)
     finally:
         r.cleanup()
+
+
+def test_the_export_zip_itself_is_refused_with_the_command_to_unpack_it(tmp_path, capsys):
+    """Canvas's download is one zip of the whole class: never graded as one student named after the zip."""
+    folder = _canvas(tmp_path / "c")
+    export = tmp_path / "course-assignment_submissions.zip"
+    with zipfile.ZipFile(export, "w") as z:
+        for p in sorted(folder.iterdir()):
+            z.write(p, p.name)
+    assert dtscal(["grade", str(export), "--csv", str(tmp_path / "g.csv"), "-q"]) != 0
+    err = capsys.readouterr().err
+    assert "is a Canvas export" in err and f"unzip {export} -d submissions" in err
+    assert not (tmp_path / "g.csv").exists()
+    moodle = tmp_path / "moodle.zip"
+    _zip(moodle, {f"Ada Lovelace_501_assignsubmission_file/{NB01}": RIGHT,
+                  f"Grace Hopper_502_assignsubmission_file/{NB01}": RIGHT})
+    assert dtscal(["grade", str(moodle), "-q"]) != 0
+    assert "is a Moodle export" in capsys.readouterr().err

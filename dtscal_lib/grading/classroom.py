@@ -215,6 +215,11 @@ def roster(path, assignment: str | None = None, *, one_student: str | None = Non
     if path.is_file():
         if path.suffix not in (*SUFFIXES, ".zip"):
             raise DtscalError(f"{path} is not a notebook (.ipynb), a Python file (.py) or a hand-in zip (.zip)")
+        exporter = lms.export_zip(path) if path.suffix == ".zip" and not one_student else None
+        if exporter:  # the whole class in one zip: never one student's row
+            raise DtscalError(f"{path} is a {exporter} export (every file in it is named after a student), not one "
+                              f"student's hand-in: unpack it (unzip {path} -d submissions) and grade the folder: "
+                              "dtscal grade submissions/")
         add(one_student or path.stem, path, path.name)
     elif one_student:
         enrol(one_student)

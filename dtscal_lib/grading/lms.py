@@ -28,8 +28,12 @@ and folder at its top) follows one LMS's convention; any other layout keeps the 
 from __future__ import annotations
 
 import re
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+
+#: entries of a zip looked at to tell an LMS export (a Canvas class of 300 has about 300)
+MAX_NAMES = 5000
 
 #: Canvas: name, optional LATE, user id, file id, the file's own name (``content_zipper.rb``)
 CANVAS = re.compile(r"(?P<name>\w+?)(?P<late>_LATE)?_(?P<uid>\d+)_(?P<fid>\d+)_(?P<file>.+)", re.IGNORECASE)
@@ -55,18 +59,18 @@ class Entry:
         return f"{self.name} ({self.lms} {self.user_id})"
 
 
-def _canvas(p: Path) -> Entry | None:
+def _canvas(p: Path, is_dir: bool | None = None) -> Entry | None:
     m = CANVAS.fullmatch(p.name)
-    if m is None or p.is_dir():
+    if m is None or (p.is_dir() if is_dir is None else is_dir):
         return None
     return Entry(p, "Canvas", m["uid"], m["name"], int(m["fid"]), bool(m["late"]), m["file"])
 
 
-def _moodle(p: Path) -> Entry | None:
+def _moodle(p: Path, is_dir: bool | None = None) -> Entry | None:
     m = MOODLE.fullmatch(p.name)
     if m is None:
         return None
-    if p.is_dir():  # "download submissions in folders": the folder holds the files
+    if p.is_dir() if is_dir is None else is_dir:  # "download submissions in folders": the folder holds the files
         return Entry(p, "Moodle", m["uid"], m["name"].strip()) if not m["file"] else None
     return Entry(p, "Moodle", m["uid"], m["name"].strip(), file=m["file"]) if m["file"] else None
 
@@ -80,6 +84,23 @@ def recognise(entries: list[Path]) -> list[Entry] | None:
         got = [read(p) for p in entries]
         if all(got):
             return got
+    return None
+
+
+def export_zip(path) -> str | None:
+    """The LMS whose "download all submissions" zip ``path`` is (every entry at its top follows that LMS's
+    naming), or None: such a zip is a class, never one student's hand-in."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = [i.filename for i in z.infolist()[:MAX_NAMES]]
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError):
+        return None
+    tops = {n.split("/", 1)[0] for n in names if n.split("/", 1)[0] not in ("", "__MACOSX")
+            and not n.startswith(".")}
+    entries = [Path(t) for t in sorted(tops)]
+    for read in (_canvas, _moodle):
+        if entries and all(read(e, any(n.startswith(e.name + "/") for n in names)) for e in entries):
+            return read.__name__.strip("_").capitalize()
     return None
 
 
