@@ -24,7 +24,8 @@ the field.
 Writing is atomic: the new content goes to a temporary file in the same folder, is
 flushed and fsync'ed, and replaces ``<ROBOT>.yaml`` with ``os.replace``. The previous
 ``<ROBOT>.yaml`` is kept as ``<ROBOT>.yaml.bak`` (the last one only). A failed write
-leaves the previous file as it was and removes the temporary file.
+leaves the previous file as it was and removes the temporary file. A target that is a device
+or a FIFO is written through, never replaced (:mod:`dtscal_lib.safe_write`).
 
 Examples
 --------
@@ -43,8 +44,6 @@ import math
 import os
 import re
 import shutil
-import stat
-import tempfile
 import time
 import warnings
 from dataclasses import FrozenInstanceError
@@ -55,7 +54,7 @@ import numpy as np
 import yaml
 
 from . import duckietown as dt
-from . import safe_yaml
+from . import safe_write, safe_yaml
 from .camera import CameraModel, as_model_dist, rectification_maps, undistort_pixels
 from .errors import CalibrationFileError, CalibrationFileWarning, DtscalError
 
@@ -594,41 +593,6 @@ def _dump(doc: dict) -> str:
 STALE_TMP_SECONDS = 300
 
 
-def _umask() -> int:
-    """The process's umask, read without changing it where Linux allows."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    mask = os.umask(0o022)  # elsewhere: the classic read-and-restore
-    os.umask(mask)
-    return mask
-
-
-def _take_rights(fd: int, path: Path) -> None:
-    """Give the new file ``path``'s mode (and owner, where allowed), or the umask's mode if it is new.
-
-    ``mkstemp`` creates 0600; a calibration replaced on a shared robot or course folder must stay
-    readable by whoever could read it before.
-    """
-    if not hasattr(os, "fchmod"):  # not POSIX: the platform's defaults apply
-        return
-    try:
-        st = os.stat(path)
-    except OSError:
-        os.fchmod(fd, 0o666 & ~_umask())
-        return
-    os.fchmod(fd, stat.S_IMODE(st.st_mode))
-    if hasattr(os, "fchown") and (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
-        try:
-            os.fchown(fd, st.st_uid, st.st_gid)
-        except OSError:  # only root may give files away; the mode is kept all the same
-            pass
-
-
 def _remove_stale_temporaries(path: Path) -> None:
     """Remove temporary files a killed writer of ``path`` left (``.NAME[.bak].XXXXXXXX.tmp``)."""
     pattern = re.compile(r"\." + re.escape(path.name) + r"(\.bak)?\.[a-z0-9_]{8}\.tmp")
@@ -648,35 +612,25 @@ def _remove_stale_temporaries(path: Path) -> None:
 
 
 def _atomic_write(path: Path, text: str, *, backup: bool = True) -> Path:
-    """Write ``text`` to ``path`` atomically; keep the previous file as ``path.bak``.
-
-    The new file keeps the previous file's mode (a new one follows the umask), and stale
-    temporary files of earlier, killed writes are removed.
+    """Write ``text`` to ``path`` by the kit's one rule (:func:`.safe_write.output`: atomic, the
+    previous file's mode kept, a new one by the umask, a device written through, never replaced);
+    keep the previous file as ``path.bak``. Stale temporary files of earlier, killed writes are removed.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            _take_rights(f.fileno(), path)
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        if backup and path.exists():
-            bak = path.with_name(path.name + ".bak")
-            fd2, tmp_bak = tempfile.mkstemp(prefix=f".{bak.name}.", suffix=".tmp", dir=path.parent)
-            os.close(fd2)
-            try:
-                shutil.copy2(path, tmp_bak)
-                os.replace(tmp_bak, bak)
-            finally:
-                if os.path.exists(tmp_bak):
-                    os.unlink(tmp_bak)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        with safe_write.output(path, what="calibration file", fsync=False) as tmp:
+            with open(tmp, "w", encoding="utf-8") as f:  # on disk before the backup is touched
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            if backup and path.is_file():
+                bak = path.with_name(path.name + ".bak")
+                with safe_write.output(bak, what="backup of the calibration file", fsync=False) as tmp_bak:
+                    shutil.copy2(path, tmp_bak)
+    except DtscalError as exc:  # a target that is no file (a folder where the .bak goes): refused
+        raise CalibrationFileError(f"{path}: could not be written ({exc}); the previous file is "
+                                   "unchanged") from None
     _fsync_dir(path.parent)
     return path
 

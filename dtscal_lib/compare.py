@@ -27,12 +27,14 @@ per pixel (worst direction, :func:`dtscal_lib.quality.projection_uncertainty` at
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from .camera import CameraModel, pixel_to_normalized, project_rays, undistort_model
+from . import safe_write
 from .errors import DtscalError
 
 #: mrcal's default grid (``projection_diff(gridn_width=60)``)
@@ -280,7 +282,9 @@ def write_figure(comp: Comparison, path) -> None:
         ax.annotate(f"{v['diff_px']:.2f}", v["pixel"], color="white", fontsize=9, ha="center")
     ax.set_title(f"{comp.names[1]} vs {comp.names[0]}: max {comp.max_px:.2f} px, rotation {comp.rotation_deg:.3f} deg")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    ext = os.path.splitext(str(path))[1] or ".png"
+    with safe_write.output(path, what="comparison figure", suffix=ext) as tmp:
+        fig.savefig(tmp, dpi=90, format=ext.lstrip("."))
     plt.close(fig)
 
 

@@ -42,6 +42,7 @@ from matplotlib.figure import Figure
 from .figure import (BAD_COLOR, GOOD_COLOR, GREY, PALETTE, WARN_COLOR,  # the kit's one figure convention and palette
                      CourseFigure, outlined)
 
+from . import safe_write
 from .errors import DtscalError
 from .quality import REGION_NAMES, Quality
 
@@ -240,7 +241,8 @@ def write_report(result, directory, quality: Quality | None = None, *, title: st
     q = _q(result, quality)
     for name, (fn, _) in FIGURES.items():
         fig = fn(result, q)
-        fig.savefig(out / name, dpi=100)
+        with safe_write.output(out / name, what="report figure", suffix=".png") as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
     rows = dict(extra or {})
     K = result.K
     rows.update({
@@ -283,7 +285,7 @@ th{{text-align:left;padding-right:1em}} img{{max-width:100%}} figure{{margin:1.5
 </body></html>
 """
     index = out / "index.html"
-    index.write_text(page, encoding="utf-8")
+    safe_write.write_text(index, page, what="report page")
     return index
 
 

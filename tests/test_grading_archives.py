@@ -339,3 +339,72 @@ def test_one_student_takes_loose_notebooks_and_zips_alike(tmp_path):
     finally:
         r.cleanup()
     assert not scratch.exists()  # and removed afterwards
+
+
+# --------------------------------------------------------------------------- hidden entries, sizes, names
+def _correct(assignment: str) -> bytes:
+    return sorted(CORRECT.glob(f"{assignment}__*.py"))[0].read_bytes()
+
+
+def test_dot_folders_and_macos_droppings_are_never_graded(tmp_path):
+    """A stale ``.ipynb_checkpoints`` copy, macOS's ``__MACOSX`` AppleDouble files and anything in a dot-folder,
+    in a zip or in a student's folder, are not graded (nor taken for a second copy of a graded notebook)."""
+    from dtscal_lib.grading.classroom import roster
+
+    stale = {".ipynb_checkpoints/01_pinhole_projection-checkpoint.py": _correct("01_pinhole_projection"),
+             "__MACOSX/._02_homography.py": b"\x00\x05\x16\x07 AppleDouble",
+             "work/.hidden/01_pinhole_projection.py": _correct("01_pinhole_projection")}
+    (tmp_path / "class").mkdir()
+    _zip(tmp_path / "class" / "ada.zip", {"02_homography.py": _correct("02_homography"), **stale})
+    for rel, data in {"02_homography.py": _correct("02_homography"), **stale}.items():
+        (tmp_path / "class" / "bob" / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "class" / "bob" / rel).write_bytes(data)
+    r = roster(tmp_path / "class")
+    try:
+        assert sorted((i.student, i.assignment, i.shown) for i in r.items) == [
+            ("ada", "02_homography", "ada.zip/02_homography.py"), ("bob", "02_homography", "bob/02_homography.py")]
+        assert r.assignments == ["02_homography"]  # no copy of 01 anywhere made it a column
+        for s in ("ada", "bob"):
+            notes = r.notes.get(s, [])
+            assert not any("checkpoint" in n or "MACOSX" in n or "hidden" in n for n in notes), notes
+    finally:
+        r.cleanup()
+
+
+def test_an_entry_is_capped_by_its_size_whatever_its_header_says(tmp_path):
+    """A stored (uncompressed: no ratio to betray it) 40 MiB notebook, over the 32 MiB member cap: refused by its
+    header before a byte is read; the same entry whose header claims 1 kB yields no more than that (Python's
+    zipfile stops at the declared size, then the CRC fails): nothing of it is written, the student is told."""
+    from dtscal_lib.grading.archive import MAX_MEMBER_BYTES, read_zip
+
+    big = 40 * 2 ** 20
+    assert big > MAX_MEMBER_BYTES
+    honest = tmp_path / "honest.zip"
+    with zipfile.ZipFile(honest, "w", zipfile.ZIP_STORED) as z:
+        z.writestr("01_pinhole_projection.ipynb", bytes(big))
+    data = honest.read_bytes()
+    lying = tmp_path / "lying.zip"  # the central directory's uncompressed size (offset 24) says 1 kB
+    cd = data.rindex(b"PK\x01\x02")
+    lying.write_bytes(data[:cd + 24] + (1024).to_bytes(4, "little") + data[cd + 28:])
+    for z, said in ((honest, "40.0 MB unpacked, more than the 32 MB"), (lying, "cannot be unpacked")):
+        into = tmp_path / f"scratch-{z.stem}"
+        into.mkdir()
+        got = read_zip(z, into)
+        assert not got.members and any(said in n for n in got.notes), got.notes
+        assert not any(into.rglob("*.ipynb"))
+
+
+def test_a_folder_and_a_file_with_one_name_are_two_students(tmp_path):
+    """``alice/`` and ``alice.py`` in one class folder: two hand-ins, two rows, and the rule said in the row."""
+    from dtscal_lib.grading.classroom import roster
+
+    (tmp_path / "class" / "alice").mkdir(parents=True)
+    (tmp_path / "class" / "alice" / "02_homography.py").write_bytes(_correct("02_homography"))
+    (tmp_path / "class" / "alice.py").write_bytes(_correct("01_pinhole_projection"))
+    (tmp_path / "class" / "bob.py").write_bytes(_correct("01_pinhole_projection"))
+    r = roster(tmp_path / "class")
+    assert sorted(r.students) == ["alice", "alice.py", "bob"]
+    assert sorted((i.student, i.assignment) for i in r.items) == [
+        ("alice", "02_homography"), ("alice.py", "01_pinhole_projection"), ("bob", "01_pinhole_projection")]
+    assert any("alice/, alice.py share the name 'alice'" in n and "two hand-ins" in n for n in r.notes["alice.py"])
+    assert not any("already graded" in n for s in r.students for n in r.notes.get(s, []))

@@ -161,3 +161,42 @@ def test_bad_roster_file(tmp_path, capsys):
     bad.write_text("name,url\nalice,x\n")
     assert dtscal(["grade", "--roster", str(bad)]) == 2
     assert "must name the columns student and repo" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- the deadline's second and zone
+@pytest.fixture
+def new_york(monkeypatch):
+    """This machine's zone set to New York (UTC-5 in December), so a deadline read as UTC is 5 h off."""
+    import time
+
+    monkeypatch.setenv("TZ", "America/New_York")
+    time.tzset()
+    yield
+    monkeypatch.undo()
+    time.tzset()
+
+
+def test_a_commit_exactly_at_the_deadline_counts_and_one_second_later_does_not(tmp_path, new_york):
+    from dtscal_lib.grading.gitroster import parse_deadline, pick_commit
+
+    # 23:59:00 local in New York is 04:59:00 UTC the next day; the dates carry their own zone (git's format)
+    _bare, work, (at, late) = _repo(tmp_path, "ada", [("2026-12-01T23:59:00-05:00", {NB: SOL / NB}),
+                                                      ("2026-12-01T23:59:01-05:00", {NB: "wrong"})])
+    assert pick_commit(work, deadline=parse_deadline("2026-12-01T23:59"))[0] == at  # zone-less: local time
+    assert pick_commit(work, deadline=parse_deadline("2026-12-02T04:59:01Z"))[0] == late
+    with pytest.raises(Exception, match="no commit at or before the deadline"):
+        pick_commit(work, deadline=parse_deadline("2026-12-01T23:58:59"))
+
+
+def test_a_zone_less_deadline_is_local_time_and_printed_as_such(new_york):
+    from datetime import datetime, timezone
+
+    from dtscal_lib.grading.gitroster import deadline_now_note, parse_deadline, zone_given
+
+    d = parse_deadline("2026-12-01T23:59")
+    assert d.astimezone(timezone.utc) == datetime(2026, 12, 2, 4, 59, tzinfo=timezone.utc)
+    note = deadline_now_note(d, local=not zone_given("2026-12-01T23:59"))
+    assert "2026-12-01T23:59-05:00" in note and "this machine's local time, EST" in note
+    assert "2026-12-02 04:59 UTC" in note and "a commit at the deadline counts" in note
+    assert zone_given("2026-12-01T23:59Z") and zone_given("2026-12-01T23:59+01:00")
+    assert "local time" not in deadline_now_note(parse_deadline("2026-12-01T23:59Z"))

@@ -23,10 +23,10 @@ the virtual environment's Python.
 
 from __future__ import annotations
 
-import os
 import zipfile
 from pathlib import Path
 
+from .. import safe_write
 from ..errors import DtscalError
 from .material import find_material
 
@@ -117,8 +117,8 @@ def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> 
         raise DtscalError(f"{out} should end in .zip (Gradescope takes a zip file)")
     out.parent.mkdir(parents=True, exist_ok=True)
     flag = f"--assignment {assignment} " if assignment else ""
-    tmp = out.with_name(out.name + ".part")
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+    with safe_write.output(out, what="Gradescope bundle", suffix=".part") as tmp, \
+            zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         _add_text(z, "setup.sh", SETUP_SH)
         _add_text(z, "run_autograder", RUN_AUTOGRADER.format(assignment=flag))
         for tree in TREES:
@@ -131,7 +131,6 @@ def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> 
         for f in FILES:
             if (root / f).is_file():
                 z.write(root / f, f)
-    os.replace(tmp, out)
     return out
 
 

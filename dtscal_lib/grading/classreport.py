@@ -10,10 +10,9 @@ graded are listed too, so the page loses no one.
 from __future__ import annotations
 
 import html
-import os
-import tempfile
 from pathlib import Path
 
+from .. import safe_write
 from .errors import GRADER_ERROR
 from .grade import GRADER_ERROR_STATUS, GradeResult
 from .material import ASSIGNMENTS
@@ -123,9 +122,4 @@ def write_report(folder, by_student: dict[str, list[GradeResult]], notes: dict |
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     page = folder / "index.html"
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".index.")
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        f.write(render(by_student, notes))
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, page)
-    return page
+    return safe_write.write_text(page, render(by_student, notes), what="class report", mode=0o644)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import DtscalError
+from . import lms
 from .archive import read_zip
 from .grade import GradeResult, grade_file
 from .loader import load_submission
@@ -80,6 +81,19 @@ def _ungraded(name: str) -> str | None:
 def _files(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*") if p.is_file()
                   and not any(part.startswith(".") or part == "__pycache__" for part in p.relative_to(folder).parts))
+
+
+def same_stem(folders: list[Path], files: list[Path]) -> dict[str, str]:
+    """Names that a class folder's hand-ins share (``alice/`` and ``alice.py``, or ``alice.ipynb`` and
+    ``alice.zip``): ``{stem: "alice/, alice.py"}``. The rule: each such file is its own student, named by
+    the file's whole name (``alice.py``); the folder keeps the bare name. Never merged: one student's
+    work never silently takes the place of another's."""
+    seen: dict[str, list[str]] = {}
+    for d in folders:
+        seen.setdefault(d.name, []).append(d.name + "/")
+    for p in files:
+        seen.setdefault(p.stem, []).append(p.name)
+    return {stem: ", ".join(names) for stem, names in seen.items() if len(names) > 1}
 
 
 def match_by_functions(path: Path) -> str | None:
@@ -172,9 +186,40 @@ def roster(path, assignment: str | None = None, *, one_student: str | None = Non
         for m in got.members:
             add(student, m.path, f"{rel}/{m.name}")
 
+    def add_export(entries: list[lms.Entry]) -> None:
+        """Each student's entries newest first: an assignment is graded from the latest file that holds it;
+        a file that adds nothing newer is listed as an earlier submission, once, not graded."""
+        mine: dict[str, list[lms.Entry]] = {}
+        for e in entries:
+            mine.setdefault(e.student, []).append(e)
+        for student, es in sorted(mine.items()):
+            enrol(student)
+            graded: list[lms.Entry] = []
+            for e in lms.newest_first(es):
+                files = _files(e.path) if e.path.is_dir() else [e.path]
+                n_items, n_notes = len(r.items), len(r.notes.get(student, []))
+                for p in sorted(files, key=lambda p: (p.suffix == ".zip", str(p))):  # loose notebooks first
+                    add(student, p, p.relative_to(path).as_posix())
+                late = f" ({e.lms} marked it LATE)" if e.late else ""
+                if len(r.items) > n_items:
+                    graded.append(e)
+                    if e.late:
+                        r.note(student, f"{e.path.name}: LATE: {e.lms} marked this submission late")
+                elif graded:  # superseded: one line instead of a note per notebook in it
+                    del r.notes[student][n_notes:]
+                    r.note(student, f"{e.path.name}: an earlier submission{late}, not graded: the latest, "
+                                    f"{graded[0].path.name}, is")
+                elif not files:
+                    r.note(student, f"{e.path.name}/: no notebook or .py file handed in (nor a hand-in zip)")
+
     if path.is_file():
         if path.suffix not in (*SUFFIXES, ".zip"):
             raise DtscalError(f"{path} is not a notebook (.ipynb), a Python file (.py) or a hand-in zip (.zip)")
+        exporter = lms.export_zip(path) if path.suffix == ".zip" and not one_student else None
+        if exporter:  # the whole class in one zip: never one student's row
+            raise DtscalError(f"{path} is a {exporter} export (every file in it is named after a student), not one "
+                              f"student's hand-in: unpack it (unzip {path} -d submissions) and grade the folder: "
+                              "dtscal grade submissions/")
         add(one_student or path.stem, path, path.name)
     elif one_student:
         enrol(one_student)
@@ -189,14 +234,27 @@ def roster(path, assignment: str | None = None, *, one_student: str | None = Non
         code = [p for p in top if p.suffix in SUFFIXES]
         zips = [p for p in top if p.suffix == ".zip"]
         named = [p for p in code if assignment_of(p.name) or _ungraded(p.name)]
+        exported = lms.recognise([*subdirs, *code, *zips])
         if code and not subdirs and not zips and len(named) == len(code) and not forced \
                 and len({assignment_of(p.name) for p in code}) == len(code):
             for p in top:  # one student's folder: notebooks named after the assignments
                 add(path.name, p, p.name)
+        elif exported:  # a Canvas or Moodle export: one row per student of the LMS, the latest graded
+            for p in top:
+                if p.suffix not in (*SUFFIXES, ".zip"):
+                    r.unplaced.append(f"{p.name}: not a notebook, .py file or hand-in zip of the {exported[0].lms} "
+                                      "export; not graded")
+            add_export(exported)
         else:
+            shared = same_stem(subdirs, [p for p in top if p.suffix in (*SUFFIXES, ".zip")])
             for p in top:
                 if p.suffix in (*SUFFIXES, ".zip"):  # one file, one student: named by the file
-                    add(p.stem, p, p.name)
+                    who = p.name if p.stem in shared else p.stem
+                    add(who, p, p.name)
+                    if p.stem in shared:
+                        r.note(who, f"{p.name}: graded as its own student {who!r}: {shared[p.stem]} share the name "
+                                    f"{p.stem!r} (a folder and a file, or two files, are two hand-ins); merge "
+                                    "them by hand if they are one student's")
                 else:
                     r.unplaced.append(f"{p.name}: not a notebook, .py file, hand-in zip or student folder; "
                                       "no student to give it to, not graded")

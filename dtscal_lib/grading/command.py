@@ -76,11 +76,12 @@ def cmd_grade(args) -> int:
         out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment)
         print(f"wrote {out}: upload it as the autograder of a Gradescope programming assignment")
         return 0
+    _check_outputs(args)  # a --csv that is a folder or a disk: refused before the class is graded
     git_notes: dict[str, list[str]] = {}
     if args.roster or args.deadline:  # git hand-in: clone each repository at its commit into a class folder
         import tempfile
 
-        from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster
+        from .gitroster import checkout_roster, deadline_now_note, parse_deadline, read_roster, zone_given
 
         if not args.roster or args.submission:
             raise DtscalError("--deadline goes with --roster CSV|DIR; --roster replaces the submission argument")
@@ -88,7 +89,8 @@ def cmd_grade(args) -> int:
         entries = read_roster(args.roster)
         class_tmp = tempfile.TemporaryDirectory(prefix="dtscal-roster-class-")  # noqa: F841 (kept until graded)
         if deadline is not None and not args.quiet:
-            print(f"grading {len(entries)} repositories at the {deadline_now_note(deadline)}", file=sys.stderr)
+            print(f"grading {len(entries)} repositories at the "
+                  f"{deadline_now_note(deadline, local=not zone_given(args.deadline))}", file=sys.stderr)
         for co in checkout_roster(entries, class_tmp.name, deadline=deadline):
             git_notes[co.student] = co.notes
         args.submission = class_tmp.name
@@ -98,6 +100,9 @@ def cmd_grade(args) -> int:
         raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
     validate_limits(args.wall, args.cpu, args.mem)
     material = Material.load(args.material)
+    from .preflight import check_numpy
+
+    check_numpy()  # numpy that cannot load in the sandbox: refused here, not a class of "grader error"
     r = roster(args.submission, args.assignment, one_student=args.one_student)
     for student, notes in git_notes.items():  # which commit was graded, or why none: first in the row
         r.notes[student] = notes + r.notes.get(student, [])
@@ -105,6 +110,18 @@ def cmd_grade(args) -> int:
         return _grade_roster(args, r, material)
     finally:
         r.cleanup()  # the members taken from hand-in zips
+
+
+def _check_outputs(args) -> None:
+    """Refuse, before any work, an output that cannot be written (:func:`dtscal_lib.safe_write.check`)."""
+    from pathlib import Path
+
+    from .. import safe_write
+
+    for target, what in ((args.json, "--json file"), (args.csv, "--csv file"),
+                         (args.report and Path(args.report) / "index.html", "class report (--report)")):
+        if target:
+            safe_write.check(target, what=what)
 
 
 def _grade_roster(args, r, material) -> int:

@@ -23,6 +23,7 @@ row with 0 points and the reason.
 from __future__ import annotations
 
 import csv
+import math
 import os
 import shutil
 import subprocess
@@ -137,7 +138,9 @@ def pick_commit(clone: Path, *, commit: str | None = None, deadline: datetime | 
             raise DtscalError(f"commit {commit} is not in the repository")
         rev = p.stdout.strip()
     elif deadline is not None:
-        p = _git("rev-list", "-1", f"--until={int(deadline.timestamp())}", "HEAD", cwd=clone)
+        # git keeps a commit whose date is <= --until (a commit at the deadline, to the second, counts);
+        # commit dates are whole seconds, so a fractional deadline is rounded down to its second
+        p = _git("rev-list", "-1", f"--until={math.floor(deadline.timestamp())}", "HEAD", cwd=clone)
         rev = p.stdout.strip()
         if p.returncode or not rev:
             raise DtscalError(f"no commit at or before the deadline {deadline.isoformat(timespec='minutes')}")
@@ -205,7 +208,7 @@ def checkout_roster(entries: list[Entry], class_dir, *, deadline: datetime | Non
                 continue
             names = _copy_notebooks(clone, folder)
             how = "the roster's commit" if e.commit else (
-                "the last commit before the deadline" if deadline is not None else "the newest commit")
+                "the last commit at or before the deadline" if deadline is not None else "the newest commit")
             co.notes.append(f"git: graded commit {co.commit[:10]} of {co.date} ({how}), "
                             f"{len(names)} notebook(s) from "
                             + ("workspace/" if (clone / "workspace").is_dir() else "the repository's top folder"))
@@ -215,5 +218,17 @@ def checkout_roster(entries: list[Entry], class_dir, *, deadline: datetime | Non
     return out
 
 
-def deadline_now_note(deadline: datetime) -> str:
-    return f"deadline {deadline.isoformat(timespec='minutes')} ({deadline.astimezone(timezone.utc):%Y-%m-%d %H:%M} UTC)"
+def zone_given(text: str) -> bool:
+    """Whether a ``--deadline`` text names its time zone (``Z``, ``+01:00``); without one it is local time."""
+    try:
+        return datetime.fromisoformat(text.strip().replace("Z", "+00:00")).tzinfo is not None
+    except ValueError:
+        return False
+
+
+def deadline_now_note(deadline: datetime, *, local: bool = False) -> str:
+    """The deadline as graded, with its zone said: ``local`` for a deadline given without a zone (read
+    in this machine's time zone, as git reads a date without one)."""
+    where = f"this machine's local time, {deadline.tzname() or deadline.strftime('%z')}; " if local else ""
+    return (f"deadline {deadline.isoformat(timespec='minutes')} ({where}"
+            f"{deadline.astimezone(timezone.utc):%Y-%m-%d %H:%M} UTC); a commit at the deadline counts")

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
-import os
-import tempfile
 from pathlib import Path
+
+from .. import safe_write
 
 from .errors import GRADER_ERROR
 from .grade import GRADER_ERROR_STATUS, GradeResult
@@ -89,14 +90,9 @@ def gradescope(results: list[GradeResult], notes: list[str] = ()) -> dict:
 
 
 def write_json(path, obj) -> Path:
-    """Write ``obj`` atomically (a reader never sees half a file)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as f:
-        json.dump(obj, f, indent=1)
-    os.replace(tmp, path)
-    return path
+    """Write ``obj`` atomically (a reader never sees half a file; a device is written through,
+    never replaced: :mod:`dtscal_lib.safe_write`)."""
+    return safe_write.write_text(path, json.dumps(obj, indent=1), what="results JSON")
 
 
 def write_csv(path, by_student: dict[str, list[GradeResult]], notes: dict | None = None) -> Path:
@@ -112,18 +108,16 @@ def write_csv(path, by_student: dict[str, list[GradeResult]], notes: dict | None
     maximum = 0.0
     for rs in by_student.values():
         maximum = max(maximum, sum(r.max_score for r in rs))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["student", *funcs, "total", "max", "notes"])
-        for student in sorted(by_student):
-            cells = {f.name: (GRADER_ERROR_STATUS if f.status == GRADER_ERROR_STATUS else f"{f.score:g}")
-                     for r in by_student[student] for f in r.functions}
-            total = sum(r.score for r in by_student[student])
-            failed = any(r.grader_error for r in by_student[student])
-            extra = [f"{r.assignment}: {n}" for r in by_student[student] for n in r.notes]
-            w.writerow([csv_cell(student), *[cells.get(f, "0") for f in funcs],
-                        GRADER_ERROR_STATUS if failed else f"{total:g}", f"{maximum:g}",
-                        csv_cell("; ".join([*notes.get(student, []), *extra]))])
-    return path
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow(["student", *funcs, "total", "max", "notes"])
+    for student in sorted(by_student):
+        cells = {f.name: (GRADER_ERROR_STATUS if f.status == GRADER_ERROR_STATUS else f"{f.score:g}")
+                 for r in by_student[student] for f in r.functions}
+        total = sum(r.score for r in by_student[student])
+        failed = any(r.grader_error for r in by_student[student])
+        extra = [f"{r.assignment}: {n}" for r in by_student[student] for n in r.notes]
+        w.writerow([csv_cell(student), *[cells.get(f, "0") for f in funcs],
+                    GRADER_ERROR_STATUS if failed else f"{total:g}", f"{maximum:g}",
+                    csv_cell("; ".join([*notes.get(student, []), *extra]))])
+    return safe_write.write_text(path, buf.getvalue(), what="class CSV")

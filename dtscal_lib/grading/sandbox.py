@@ -514,6 +514,17 @@ def _bare_argv() -> list[str]:
     return [m.interpreter, "-I", "-S", "-c", _ENTRY.format(harness=str(sandbox_lib()), site=site)]
 
 
+def probe_argv(code: str) -> list[str]:
+    """The command that runs ``code`` with the interpreter and numpy a submission gets (inside bubblewrap,
+    or bare where there is none), without the harness: for checks at the grader's start."""
+    if mode() == "bare":
+        exe, _, numpy_binds = _python()
+        return [exe, "-I", "-S", "-c", f"import sys; sys.path[:0] = [{os.path.dirname(numpy_binds[0])!r}]; {code}"]
+    argv = bwrap_argv(0, None)
+    i = argv.index("--")
+    return argv[:i + 1] + [argv[i + 1], "-I", "-S", "-c", f"import sys; sys.path[:0] = ['/sandbox/site']; {code}"]
+
+
 _PROBE: dict = {}
 
 

@@ -29,6 +29,7 @@ import sys
 
 import numpy as np
 
+from .. import safe_write
 from .checks import inputs_and_truth
 from .material import find_material
 from .metrics import (  # noqa: F401 - the metrics and the tolerance file, as this script's users know them
@@ -245,7 +246,8 @@ def main(argv=None) -> int:
         out[key]["check"] = spec["name"]
         print(key, json.dumps(out[key]["tolerance"]), "max", json.dumps(out[key]["max"]), file=sys.stderr)
     if a.write:
-        tolerance_file(root).write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
+        safe_write.write_text(tolerance_file(root), json.dumps(out, indent=1, sort_keys=True) + "\n",
+                              what="tolerance file")
     else:
         print(json.dumps(out, indent=1, sort_keys=True))
     return 0

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import safe_write
 from ..errors import FrameError, Reason, SourceError
 from .bagformat import MAGIC, RawConnection, RawMessage, ScanEnd, scan_bag
 from .decode import decode_image, describe_file_type, raw_image_to_bgr
@@ -379,15 +380,12 @@ def write_compressed_image_bag(
         raise SourceError(f"chunk_threshold must be a positive number of bytes, got {chunk_threshold}")
     if path.is_dir():
         raise SourceError(f"{str(path)!r} is a folder; pass a file name ending in .bag")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    if tmp.exists():
-        tmp.unlink()
     typestore = _typestore()
     CompressedImage = typestore.types[COMPRESSED_IMAGE]
     Header = typestore.types["std_msgs/msg/Header"]
     Time = typestore.types["builtin_interfaces/msg/Time"]
-    try:
+    with safe_write.output(path, what="recording", suffix=".bag") as tmp:
+        tmp.unlink()  # rosbags' Writer makes the file itself and refuses one that exists
         writer = Writer(tmp)
         writer.chunk_threshold = int(chunk_threshold)
         with writer:
@@ -407,11 +405,6 @@ def write_compressed_image_bag(
                     data=payload,
                 )
                 writer.write(conn, stamp_ns, typestore.serialize_ros1(msg, COMPRESSED_IMAGE))
-        os.replace(tmp, path)
-    except BaseException:
-        if tmp.exists():
-            tmp.unlink()
-        raise
     return path
 
 

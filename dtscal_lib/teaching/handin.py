@@ -10,12 +10,12 @@ submission folder, finds the notebooks where it looks for them.
 from __future__ import annotations
 
 import getpass
-import os
 import re
 import subprocess
 import zipfile
 from pathlib import Path
 
+from .. import safe_write
 from ..errors import DtscalError
 
 HANDIN = "handin"
@@ -73,15 +73,12 @@ def write_handin(root, name: str | None = None, out=None) -> tuple[Path, list[st
     target = Path(out) if out else root / HANDIN / f"{who}.zip"
     if target.suffix != ".zip":
         raise DtscalError(f"{target} should end in .zip")
-    tmp = target.with_name(f".{target.name}.part")
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        with safe_write.output(target, what="hand-in zip", suffix=".part") as tmp, \
+                zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
             for p in nbs:
                 z.write(p, p.name)
-        os.replace(tmp, target)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise DtscalError(f"writing {target} failed ({exc.strerror or exc}); free some space or pass "
                           "--out ANOTHER.zip") from None
     return target, [p.name for p in nbs]

@@ -22,7 +22,9 @@ Safety: the old notebooks go to a new ``workspace/backups/<stamp>[-N]/`` (never 
 every merged notebook is written to a temporary file first and then renamed over the old one
 (``os.replace``), undone if a later rename fails; a lock file (``workspace/.update.lock``)
 makes a second update wait for the first; every failure raises :class:`DtscalError` with one
-line saying what to do, and leaves the workspace as it was.
+line saying what to do, and leaves the workspace as it was. A notebook that is a device, a FIFO or a
+dangling link is neither read nor replaced (listed as not carried); a symlinked notebook stays a
+link, the file it names is updated (:mod:`dtscal_lib.safe_write`).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from pathlib import Path
 
 import nbformat
 
+from .. import safe_write
 from ..errors import DtscalError
 from .release import BEGIN_YOURS, END_YOURS
 
@@ -451,8 +454,14 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
             except Exception as exc:  # noqa: BLE001 (a damaged course is the instructor's to fix)
                 raise DtscalError(f"the course notebook {new_path} cannot be read ({type(exc).__name__}); unpack "
                                   "the course again; nothing was changed") from None
-            if not old_path.exists():
+            safe_write.check(ws / BASE / new_path.name, what="course copy of the notebook", through=False)
+            if not old_path.exists() and not old_path.is_symlink():
                 plans.append((new_path.name, new, None))
+                continue
+            try:  # a device, a FIFO or a dangling link in the student's place: never read, never replaced
+                safe_write.check(old_path, what="notebook", through=False)
+            except DtscalError as exc:
+                report.not_carried.append(f"{new_path.name}: {exc}; left as it is")
                 continue
             try:
                 old = nbformat.read(str(old_path), as_version=4)
@@ -494,10 +503,11 @@ def update_workspace(root, *, stamp: str | None = None, lock_wait_s: float = LOC
                         shutil.copy2(old_path, backup_dir / name)
                         report.backups.append(str(backup_dir / name))
             (ws / BASE).mkdir(exist_ok=True)
-            for name, merged, _old in plans:
-                temps.append((_write_temp(ws / name, merged), ws / name))
-                temps.append((_write_temp(ws / BASE / name, nbformat.read(str(root / "notebooks" / name),
-                                                                          as_version=4)), ws / BASE / name))
+            for name, merged, _old in plans:  # a symlinked notebook stays a link: the file it names is updated
+                for final, nb in ((safe_write.real(ws / name), merged),
+                                  (safe_write.real(ws / BASE / name),
+                                   nbformat.read(str(root / "notebooks" / name), as_version=4))):
+                    temps.append((_write_temp(final, nb), final))
         except (OSError, DtscalError) as exc:
             for tmp, _final in temps:
                 tmp.unlink(missing_ok=True)

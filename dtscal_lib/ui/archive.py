@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import calib_files
+from .. import calib_files, safe_write
 from ..boards import Board, CharucoBoard
 from ..coverage import Sample
 from ..errors import DtscalError
@@ -44,7 +44,7 @@ class SessionArchive:
 
 
 def save_session(path, *, board: Board, image_size, robot: str, samples, calibration=None) -> Path:
-    """Write the archive atomically (a temporary file renamed into place). Returns its path."""
+    """Write the archive atomically (:func:`dtscal_lib.safe_write.output`). Returns its path."""
     path = Path(path)
     if path.suffix.lower() != ".zip":
         path = path.with_suffix(".zip")
@@ -64,21 +64,15 @@ def save_session(path, *, board: Board, image_size, robot: str, samples, calibra
             "image_size": [int(image_size[0]), int(image_size[1])],
             "calibration": f"camera_intrinsic/{robot}.yaml" if calibration is not None else None}
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", delete=False) as tmp:
-            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-                z.writestr("session.json", json.dumps(meta, indent=1))
-                z.writestr("samples.npz", buf.getvalue())
-                if calibration is not None:
-                    with tempfile.TemporaryDirectory() as d:
-                        written = calib_files.save_intrinsics(calibration, d, robot)
-                        z.writestr(meta["calibration"], written.read_bytes())
-        Path(tmp.name).replace(path)
+        with safe_write.output(path, what="session archive") as tmp, \
+                zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr("session.json", json.dumps(meta, indent=1))
+            z.writestr("samples.npz", buf.getvalue())
+            if calibration is not None:
+                with tempfile.TemporaryDirectory() as d:
+                    written = calib_files.save_intrinsics(calibration, d, robot)
+                    z.writestr(meta["calibration"], written.read_bytes())
     except OSError as exc:
-        try:
-            Path(tmp.name).unlink()
-        except (OSError, UnboundLocalError):
-            pass
         raise DtscalError(f"could not save the session to {path} ({exc}); choose a writable folder") from None
     return path
 
