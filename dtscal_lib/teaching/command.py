@@ -38,7 +38,8 @@ def add_parsers(sub) -> None:
     sp.set_defaults(func=cmd_course)
 
     sp = sub.add_parser("handin", help="zip your workspace notebooks into handin/NAME.zip to hand in")
-    sp.add_argument("--name", help="your name, for the file name (default: git's user.name, else your login)")
+    sp.add_argument("--name", help="your name, for the file name (asked the first time and remembered in "
+                    "handin/.name; giving it again changes it and replaces the zip)")
     sp.add_argument("--out", metavar="FILE.zip", help="where to write the zip (default handin/NAME.zip)")
     sp.set_defaults(func=cmd_handin)
 
@@ -110,10 +111,12 @@ def cmd_handin(args) -> int:
     from ..paths import repo_root
     from . import handin
 
-    path, names = handin.write_handin(repo_root(), name=args.name, out=args.out)
+    ask = input if sys.stdin is not None and sys.stdin.isatty() else None  # asked once, then remembered
+    path, names = handin.write_handin(repo_root(), name=args.name, out=args.out, ask=ask)
     print(f"wrote {path} with {len(names)} notebook(s): {', '.join(names)}")
-    print("hand in this file (upload it to Gradescope, or as your instructor says); if your course collects "
-          "git repositories, commit and push instead: git add workspace && git commit -m 'hand in' && git push")
+    print(f"hand in this file as it is (upload it to Gradescope, or as your instructor says). It is named "
+          f"{path.stem}; to change the name: --name \"Your Name\" (the old zip is replaced).")
+    print(f"If your course collects git repositories instead: {handin.GIT_HANDIN}")
     return 0
 
 
