@@ -102,9 +102,59 @@ def cmd_course(args) -> int:
     session_dir()  # fails early, with the fix, if the recording is missing
     cmd = workspace.jupyter_command(root, instructor=args.instructor, port=args.port, ip=args.ip,
                                     no_browser=args.no_browser)
-    print("starting JupyterLab:", " ".join(cmd), file=sys.stderr)
+    print("starting JupyterLab:", " ".join(cmd), file=sys.stderr, flush=True)
+    _say_while_jupyterlab_starts()
     os.execv(sys.executable, cmd)
     return 0  # pragma: no cover
+
+
+#: seconds between two "JupyterLab is starting" lines (start.sh's and course.sh's installer lines come every 5 s too)
+TICK_SECONDS = 5.0
+
+
+def _say_while_jupyterlab_starts(limit: float = 600.0) -> None:
+    """Fork a helper that says every few seconds that JupyterLab is starting, until it serves.
+
+    This process then becomes JupyterLab (``os.execv`` keeps the pid), which writes ``jpserver-<pid>.json`` in
+    Jupyter's runtime folder once it serves (jupyter_server's ``ServerApp.info_file``): the helper stops there, or
+    when JupyterLab is gone, or after ``limit`` seconds. On a loaded machine JupyterLab
+    takes 10 s or more before its first line; without the helper that is a silence after "starting JupyterLab".
+    The helper is forked twice, so that it is nobody's zombie when it ends.
+    ``DTSCAL_TICK_SECONDS`` changes the interval.
+    """
+    import time
+
+    from jupyter_core.paths import jupyter_runtime_dir
+
+    every = float(os.environ.get("DTSCAL_TICK_SECONDS", TICK_SECONDS))
+    me = os.getpid()
+    info = Path(jupyter_runtime_dir()) / f"jpserver-{me}.json"
+    try:
+        first = os.fork()
+        if first:
+            os.waitpid(first, 0)  # the helper's parent exits at once: the helper is nobody's zombie
+            return
+    except OSError:
+        return  # no helper: JupyterLab starts all the same
+    try:
+        if os.fork():
+            os._exit(0)
+        t0 = time.monotonic()
+        said = 0
+        while time.monotonic() - t0 < limit:
+            time.sleep(min(0.5, every))
+            try:
+                os.kill(me, 0)  # JupyterLab is still there
+            except ProcessLookupError:
+                break
+            if info.exists():
+                break
+            n = int((time.monotonic() - t0) // every)
+            if n > said:
+                said = n
+                print(f"dtscal course: ... JupyterLab is starting ({n * every:g} s)", file=sys.stderr, flush=True)
+    finally:
+        os._exit(0)
 
 
 def cmd_handin(args) -> int:

@@ -128,7 +128,8 @@ Your instructor says which of the two:
   that zip as it is.
 * **Git**: this folder is a git repository and your work in `workspace/` is part of it (backups and
   `.venv/` are left out by `.gitignore`). Once: `git remote add origin ADDRESS` (the address your course
-  gives you). Then, each time you hand in:
+  gives you) and, if git does not know you yet, `git config user.name "Your Name"` and `git config user.email
+  you@example.org`. Then, each time you hand in:
 
   ```bash
   {git_handin}
