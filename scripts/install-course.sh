@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The course's first install, one for the hand-out's start.sh and the kit's scripts/course.sh (sourced by both;
+# The course's first install, one for the hand-out's start.sh and the kit's course command (sourced by both;
 # the hand-out carries this file). Never quiet for long: a line per step, every 5 s a line while a step goes on,
 # and the installer's own list of packages.
 #   WHO=start.sh; source scripts/install-course.sh; install_course [SPEC]     (SPEC: what to install, default -e .)

@@ -176,8 +176,8 @@ Open the course in JupyterLab at notebook 01 (the first run installs it into .ve
 """
 START_SH = f"""#!/usr/bin/env bash
 # Start the course: make .venv on the first run, install the course into it, open JupyterLab at notebook 01.
-# Options: bash start.sh --help. The install (scripts/install-course.sh, also the kit's scripts/course.sh) is uv's,
-# else pip's, with a line per step and a line every 5 s while a step goes on.
+# Options: bash start.sh --help. The install (scripts/install-course.sh, shared with the kit's course command) is
+# uv's, else pip's, with a line per step and a line every 5 s while a step goes on.
 set -euo pipefail
 cd "$(dirname "$0")"
 case "${{1:-}}" in
