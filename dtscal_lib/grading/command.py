@@ -78,6 +78,26 @@ def cmd_grade(args) -> int:
         r.cleanup()  # the members taken from hand-in zips
 
 
+def _class_wide_notes(notes: dict[str, list[str]]) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
+    """The notes of each student less those on the course's notebooks without an exercise (06, 03b: the same for
+    every student, said once for the class), and those: ``(row notes, {why: students})``. A student's own JSON
+    (Gradescope's output) keeps them."""
+    from .classroom import UNGRADED
+
+    whys = [why for _prefix, _word, why in UNGRADED]
+    rows: dict[str, list[str]] = {}
+    per_class: dict[str, list[str]] = {}
+    for student, said in notes.items():
+        rows[student] = []
+        for n in said:
+            why = next((w for w in whys if n.endswith(f"not graded: {w}")), None)
+            if why is None:
+                rows[student].append(n)
+            elif student not in per_class.setdefault(why, []):
+                per_class[why].append(student)
+    return rows, per_class
+
+
 def _grade_roster(args, r, material) -> int:
     from .grade import not_handed_in
     from .classroom import grade_all
@@ -85,8 +105,11 @@ def _grade_roster(args, r, material) -> int:
 
     for n in r.unplaced:
         print(f"not graded: {n}", file=sys.stderr)
+    row_notes, per_class = _class_wide_notes(r.notes)
+    for why, students in per_class.items():  # once for the class, not once per student (nor per CSV row)
+        print(f"not graded, for the whole class ({len(students)} student(s) handed it in): {why}", file=sys.stderr)
     for student in r.students:  # also in the CSV and JSON, next to the student's grades
-        for n in r.notes.get(student, []):
+        for n in row_notes.get(student, []):
             print(f"{student}: {n}", file=sys.stderr)
     from .sandbox import barriers
 
@@ -115,7 +138,7 @@ def _grade_roster(args, r, material) -> int:
                                                 for s, rs in sorted(by_student.items())},
                                    **({"not_graded": list(r.unplaced)} if r.unplaced else {}), "sandbox": held})
     if args.csv:
-        write_csv(args.csv, by_student, r.notes)
+        write_csv(args.csv, by_student, row_notes)
     if args.report:
         from .classreport import write_report
 
