@@ -55,7 +55,10 @@ def cmd_release(args) -> int:
         for p in export(args.nbgrader, repo_root=root):
             print(p)
         print(f"nbgrader course in {args.nbgrader}: cd there, then `nbgrader generate_assignment 01_pinhole_projection`"
-              " (one assignment per notebook); autograding needs the kit installed where nbgrader runs",
+              " (one assignment per notebook); autograding needs the kit installed where nbgrader runs. nbgrader's "
+              "autograde then warns \"Attribute 'checksum' for cell test_... has changed!\" for each test cell of each "
+              "student: that is nbgrader putting back the hidden tests it stripped from the students' copy "
+              "(jupyter/nbgrader#1961), not a student's tampering; a warning on any other cell is one",
               file=sys.stderr)
         return 0
     if args.check:
