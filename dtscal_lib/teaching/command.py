@@ -90,6 +90,10 @@ def cmd_course(args) -> int:
     from . import workspace
 
     root = repo_root()
+    if not args.no_open:  # from here to JupyterLab serving can take 20 s on a loaded machine: never quiet
+        print("dtscal course: opening the course (a line every few seconds until JupyterLab serves)",
+              file=sys.stderr, flush=True)
+        _say_while_jupyterlab_starts()
     if args.update:
         report = workspace.update_workspace(root)
         print(report.text(), flush=True)
@@ -106,7 +110,6 @@ def cmd_course(args) -> int:
     cmd = workspace.jupyter_command(root, instructor=args.instructor, port=args.port, ip=args.ip,
                                     no_browser=args.no_browser)
     print("starting JupyterLab:", " ".join(cmd), file=sys.stderr, flush=True)
-    _say_while_jupyterlab_starts()
     os.execv(sys.executable, cmd)
     return 0  # pragma: no cover
 
@@ -116,12 +119,13 @@ TICK_SECONDS = 5.0
 
 
 def _say_while_jupyterlab_starts(limit: float = 600.0) -> None:
-    """Fork a helper that says every few seconds that JupyterLab is starting, until it serves.
+    """Fork a helper that says every few seconds that the course is opening, until JupyterLab serves.
 
-    This process then becomes JupyterLab (``os.execv`` keeps the pid), which writes ``jpserver-<pid>.json`` in
-    Jupyter's runtime folder once it serves (jupyter_server's ``ServerApp.info_file``): the helper stops there, or
-    when JupyterLab is gone, or after ``limit`` seconds. On a loaded machine JupyterLab
-    takes 10 s or more before its first line; without the helper that is a silence after "starting JupyterLab".
+    Forked first thing (before the workspace is made or updated), since this process then becomes JupyterLab
+    (``os.execv`` keeps the pid), which writes ``jpserver-<pid>.json`` in Jupyter's runtime folder once it serves
+    (jupyter_server's ``ServerApp.info_file``): the helper stops there, or when the process is gone (an update that
+    failed, JupyterLab stopped), or after ``limit`` seconds. At load 10 on 2 cores the workspace took 8 s and
+    JupyterLab 10 s or more before its first line (benchmarks/bench_start.py): silences, without the helper.
     The helper is forked twice, so that it is nobody's zombie when it ends.
     ``DTSCAL_TICK_SECONDS`` changes the interval.
     """
@@ -155,7 +159,8 @@ def _say_while_jupyterlab_starts(limit: float = 600.0) -> None:
             n = int((time.monotonic() - t0) // every)
             if n > said:
                 said = n
-                print(f"dtscal course: ... JupyterLab is starting ({n * every:g} s)", file=sys.stderr, flush=True)
+                print(f"dtscal course: ... opening the course, JupyterLab is starting ({n * every:g} s)",
+                      file=sys.stderr, flush=True)
     finally:
         os._exit(0)
 
