@@ -63,7 +63,9 @@ install_course() {  # install_course [SPEC]: make .venv if needed and install SP
     say "[2/3] getting the uv installer from PyPI into .venv (pip)"
     if ticking "getting uv" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on uv; then
       say "[3/3] installing the course, JupyterLab and OpenCV with uv (it lists each package)"
-      if ticking "installing with uv" uv_env pip install --python .venv/bin/python -e "$spec"; then
+      # --compile-bytecode: as pip does by default (uv does not): else the first `import numpy, cv2, jupyterlab`
+      # compiles them, a silence of 10 s at load 10 after "installed" (benchmarks/bench_start.py)
+      if ticking "installing with uv" uv_env pip install --compile-bytecode --python .venv/bin/python -e "$spec"; then
         installed=uv
       else
         say "uv could not install the course; trying pip instead"
