@@ -346,6 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
         from .grading.command import add_parser as add_grade_parser  # `dtscal grade` (the autograder)
     except ModuleNotFoundError:  # the student hand-out ships without the grader
         sp = sub.add_parser("grade", help="grading is part of the instructor's kit, not of this hand-out")
+        sp.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)  # whatever the kit's takes
         sp.set_defaults(func=_no_grader)
     else:
         add_grade_parser(sub)

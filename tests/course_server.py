@@ -17,8 +17,9 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def check_student_view(proc, port: int, patience: float = 90.0) -> None:
-    """The server answers, its printed URL opens notebook 01, and no solution is in its file tree."""
+def check_student_view(proc, port: int, patience: float = 90.0) -> list[str]:
+    """The server answers, its printed URL opens notebook 01, and no solution is in its file tree; returns the lines
+    the command printed up to the address."""
     token, url = None, None
     deadline = time.time() + patience
     lines = []
@@ -41,6 +42,7 @@ def check_student_view(proc, port: int, patience: float = 90.0) -> None:
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/contents/01_pinhole_projection.ipynb?token={token}",
                                 timeout=30) as r:
         assert r.status == 200
+    return lines
 
 
 def _get(url: str, patience: float = 30.0) -> bytes:

@@ -328,3 +328,164 @@ esac
     assert updates and len(installs) == 1 and updates[0] < calls.index(installs[0])
     asked = set(installs[0].split(" install ", 1)[1].split()) - {"-y", "--no-install-recommends"}
     assert asked == PACKAGES, asked
+
+
+# ------------------------------------------------------------------ every command the hand-out shows (issue 32)
+#: the programs a shipped text's command starts with; a code span starting otherwise is code or a value, not a command
+PROGRAMS = ("bash", "sudo", "git", "export", "dtscal", ".venv/bin/dtscal", "python3", "pip", "docker", "wsl", "ping",
+            "rostopic", "apt-get", "scp", "ssh")
+#: commands shown for another computer than the student's hand-out, and where each is run instead
+ELSEWHERE = {
+    "wsl": "Windows' own prompt, before Debian exists (docs/ta.md section 2)",
+    "docker": "Docker Desktop on the Mac or Windows (docs/ta.md section 2)",
+    "apt-get": "inside the Debian container, as its root (docs/ta.md section 2)",
+    "ping": "the laptop, outside the container, to learn the robot's address",
+    "rostopic": "a computer with ROS 1 and a robot on its network",
+    "scp": "the robot, over the network (notebook 06)",
+    "sudo bash scripts/install-ros.sh": "test_robot_setup_from_the_handout_alone_on_a_computer_without_ros, with apt "
+                                        "stand-ins (this file)",
+    "bash scripts/install-ros.sh": "the same test (inside the container, as root: no sudo)",
+}
+#: a `dtscal` command shown with a robot or a placeholder is not run: its sub-command and every option it names are
+#: checked against the hand-out's own `dtscal SUB --help` (the calibration itself is other tests' subject)
+_CODE = re.compile(r"```(\w*)\n(.*?)```|`([^`]+)`", re.S)
+
+
+def _shown_commands(text: str) -> list[str]:
+    """The shell commands a text shows, in the order shown: each line of a ```bash block (comments and `\\`
+    continuations handled) and each code span that starts with one of PROGRAMS (a span broken over lines joined)."""
+    found = []
+    for lang, block, span in _CODE.findall(text):
+        if lang == "bash":
+            for line in block.replace("\\\n", " ").splitlines():
+                line = re.sub(r"\s+#\s.*$", "", line).strip()
+                if line and not line.startswith("#"):
+                    found.append(line)
+        elif span and span.split(None, 1)[0] in PROGRAMS and len(span.split()) > 1:
+            found.append(" ".join(span.split()))
+    return found
+
+
+def _in_terminal(cmd: list[str], cwd: Path, env: dict, *, typed: str = "", stop_at: str = "starting JupyterLab",
+                 timeout: float = 300) -> tuple[int | None, str]:
+    """Run ``cmd`` in a pseudo-terminal, as the student's shell does; type ``typed`` when it asks a question (a
+    line ending in ': '). Returns (exit code, or None when it was stopped at ``stop_at``, the terminal's text).
+    A command that would open JupyterLab is stopped once it says so (its arguments parsed and its workspace made;
+    JupyterLab serving is test_update_then_the_course_opens's and test_handout's)."""
+    import pty
+    import select
+    import signal
+    import time
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdin=slave, stdout=slave, stderr=slave, start_new_session=True)
+    os.close(slave)
+    out, answered, deadline = "", False, time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 0.5)
+            if ready:
+                try:
+                    chunk = os.read(master, 65536).decode(errors="replace")
+                except OSError:  # the terminal closed: the command ended
+                    chunk = ""
+                out += chunk
+                if typed and not answered and out.rstrip(" ").endswith(":") and out.endswith(": "):
+                    os.write(master, (typed + "\n").encode())
+                    answered = True
+                if stop_at in out:
+                    os.killpg(proc.pid, signal.SIGTERM)
+                    proc.wait(timeout=30)
+                    return None, out
+                if not chunk and proc.poll() is not None:
+                    break
+            elif proc.poll() is not None:
+                break
+        else:
+            os.killpg(proc.pid, signal.SIGKILL)
+            raise AssertionError(f"{cmd} did not finish in {timeout} s:\n{out[-2000:]}")
+        return proc.wait(timeout=30), out
+    finally:
+        os.close(master)
+
+
+def test_every_command_the_handout_shows_works_in_the_handout(course, tmp_path):
+    """Issue 32: every command the hand-out's texts show a student or a TA (its README, docs/ta.md as the hand-out
+    carries it, the notebooks, `bash start.sh --help`, what `--handin` prints) runs in the hand-out as shown, in
+    the order shown, in a terminal: `bash start.sh` and its options (up to the point where JupyterLab would start),
+    the hand-in (the name asked once on the terminal, then remembered; `--name` replaces the zip), the git hand-in
+    to a repository standing in for the course's, `export` lines; commands for another computer are listed in
+    ELSEWHERE with where they run. A command no rule covers fails the test (a new command needs a run)."""
+    env = _student_env(tmp_path)
+    shutil.rmtree(course / "handin", ignore_errors=True)  # a student who never handed in (other journeys did)
+    help_code, help_text = _in_terminal(["bash", "start.sh", "--help"], course, env, timeout=30)
+    assert help_code == 0 and "usage: bash start.sh" in help_text, help_text
+    texts = {"README.md": (course / "README.md").read_text(), "docs/ta.md": (course / "docs" / "ta.md").read_text(),
+             "bash start.sh --help": help_text}
+    for nb in sorted((course / "notebooks").glob("*.ipynb")):
+        texts[nb.name] = "\n".join(c.source for c in nbformat.read(str(nb), as_version=4).cells
+                                   if c.cell_type == "markdown")
+    origin = tmp_path / "course-repo.git"  # the repository the course gives the student
+    subprocess.run(["git", "init", "-q", "--bare", str(origin)], check=True)
+    shown = list(dict.fromkeys(c for t in texts.values() for c in _shown_commands(t)))
+    options = re.findall(r"^\s+(--[\w-]+)", help_text, re.M)
+    assert {"--no-browser", "--port", "--setup-only", "--update", "--handin", "--help"} <= set(options), options
+    assert "--instructor" not in help_text and "--no-open" not in help_text  # the kit's, refused in the hand-out
+    ran, elsewhere, handin_said = [], [], ""
+    while shown:
+        cmd = shown.pop(0)
+        words = cmd.split()
+        where = next((why for key, why in ELSEWHERE.items() if cmd == key or cmd.startswith(key + " ")
+                      or words[0] == key), None)
+        if where:
+            elsewhere.append(cmd)
+            continue
+        if words[:2] == ["bash", "start.sh"]:
+            line = cmd.replace("8890", str(_free_port())).replace("0.0.0.0", "127.0.0.1")
+            typed = "Ada Lovelace" if "--handin" in words and "--name" not in words else ""
+            code, out = _in_terminal(["bash", "-c", line], course, env, typed=typed)
+            assert code in (0, None), (cmd, out[-3000:])  # done, or stopped where JupyterLab starts
+            assert "unrecognized arguments" not in out and "Traceback" not in out, (cmd, out[-3000:])
+            if "--handin" in words:
+                handin_said += out.replace("\r", "")
+        elif words[0] in ("dtscal", ".venv/bin/dtscal"):
+            res = subprocess.run([".venv/bin/dtscal", words[1], "--help"], cwd=course, env=env, capture_output=True,
+                                 text=True, timeout=120)
+            assert res.returncode == 0, (cmd, res.stderr)
+            named = [w.split("=")[0] for w in words[2:] if w.startswith("--")]
+            assert [o for o in named if o not in res.stdout.split()] == [], (cmd, res.stdout)
+        elif words[0] in ("git", "export"):
+            line = cmd.replace("ADDRESS", str(origin))
+            res = subprocess.run(["bash", "-c", line], cwd=course, env=env, capture_output=True, text=True,
+                                 timeout=120)
+            assert res.returncode == 0, (cmd, res.stdout, res.stderr)
+        else:
+            raise AssertionError(f"a shipped text shows `{cmd}`, which this test neither runs nor lists in ELSEWHERE")
+        ran.append(cmd)
+    for option in options:  # every option the help lists is accepted
+        if not any(option in c.split() for c in ran) and option != "--help":
+            value = {"--port": str(_free_port()), "--ip": "127.0.0.1", "--name": '"Ada Lovelace"',
+                     "--out": str(tmp_path / "other.zip")}.get(option, "")
+            line = f"bash start.sh {'--handin ' if option in ('--name', '--out') else ''}{option} {value}".strip()
+            code, out = _in_terminal(["bash", "-c", line], course, env)
+            assert code in (0, None) and "unrecognized" not in out, (line, out[-2000:])
+            ran.append(line)
+    code, out = _in_terminal(["bash", "start.sh", "--instructor"], course, env, timeout=60)
+    assert code == 2 and "bash start.sh --help" in out, out  # refused, saying where the options are
+
+    assert any(c.startswith("bash start.sh --handin --name") for c in ran) and "git remote add origin ADDRESS" in ran
+    assert any(c.startswith("git add workspace") for c in ran), ran  # the git hand-in, from the README and --handin
+    assert {"wsl", "docker", "apt-get"} <= {c.split()[0] for c in elsewhere}, elsewhere
+    # the hand-in: asked once on the terminal, remembered, the --name'd zip the only one left, the name in the message
+    assert "Your name" in handin_said and "--name" in handin_said, handin_said
+    said_git = re.findall(r"git repositories instead: (.+)", handin_said)
+    assert said_git and set(said_git) <= set(ran), said_git  # the --handin message's git command is the one run
+    assert sorted(p.name for p in (course / "handin").glob("*.zip")) == ["Ada_Lovelace.zip"]
+    # the git hand-in reached the course's repository: the student's workspace, at the branch the roster grades
+    pushed = subprocess.run(["git", "--git-dir", str(origin), "ls-tree", "-r", "--name-only", "main"],
+                            capture_output=True, text=True, check=True).stdout.split()
+    assert f"workspace/{NB01}" in pushed and not [p for p in pushed if p.startswith(("handin/", ".venv/"))]
+    # the kit's grader is not in the hand-out: its command says so instead of failing on its arguments
+    res = subprocess.run([".venv/bin/dtscal", "grade", "handin/Ada_Lovelace.zip"], cwd=course, env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "instructor's kit" in res.stderr and "unrecognized" not in res.stderr, res.stderr

@@ -12,6 +12,7 @@ from __future__ import annotations
 import ast
 import csv
 import json
+import re
 import os
 import runpy
 import subprocess
@@ -102,8 +103,8 @@ def course(tmp_path_factory):
         dest = course / "submitted" / student / a / f"{a}.ipynb"
         dest.parent.mkdir(parents=True)
         dest.write_text(json.dumps(nb))
-    for a in ASSIGNMENTS:
-        _nbgrader(course, "autograde", a, "--create")
+    said = [_nbgrader(course, "autograde", a, "--create") for a in ASSIGNMENTS]
+    (course / "autograde.log").write_text("".join(o.stdout + o.stderr for o in said))
     return course
 
 
@@ -183,3 +184,19 @@ def test_export_carries_the_ungraded_notebooks_without_test_cells(tmp_path):
     graded = sorted(c["metadata"]["nbgrader"]["grade_id"] for c in nb["cells"] if c["metadata"]["nbgrader"]["grade"])
     assert graded == ["test_extrinsics_from_homography", "test_intrinsic_constraints",
                       "test_intrinsics_from_homographies"]
+
+
+def test_autogrades_checksum_warnings_are_nbgraders_own_hidden_tests_as_the_kit_explains(course, capsys):
+    """Issue 32: real nbgrader's autograde prints "Attribute 'checksum' for cell test_... has changed!" for every
+    autograded test cell of every student. It is nbgrader's own doing (jupyter/nbgrader#1961): generate_assignment
+    stores a test cell's checksum with its hidden tests, the students' copy has them stripped, and autograde puts
+    them back. The warnings name test cells only (never a student's solution cell, never a read-only course cell),
+    and `dtscal release --nbgrader` and docs/ta.md say so, so that an instructor does not read them as tampering."""
+    log = (course / "autograde.log").read_text()
+    warned = re.findall(r"Attribute 'checksum' for cell (\S+) has changed", log)
+    assert warned and all(cell.startswith("test_") for cell in warned), sorted(set(warned))
+    again = course.parent / "again"
+    assert dtscal(["release", "--nbgrader", str(again)]) == 0
+    message = capsys.readouterr().err
+    assert "Attribute 'checksum'" in message and "hidden tests" in message and "1961" in message, message
+    assert "jupyter/nbgrader#1961" in (ROOT / "docs" / "ta.md").read_text()

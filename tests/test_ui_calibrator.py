@@ -337,3 +337,19 @@ def test_views_show_a_placeholder_until_frames_flow_and_an_unreachable_source_co
         assert app.image.value == shown  # the last frame stays on screen
     finally:
         app.close()
+
+
+@pytest.mark.parametrize("state,frames", [("error", 0), ("error", 12), ("ended", 12)])
+def test_the_status_line_says_press_reconnect_once(state, frames):
+    """Issue 32: the ROS diagnosis ends its sentence with "then press Reconnect" and the live sources with "press
+    Reconnect to try again"; the status line adds its own RECONNECT advice only to a message that has none (it read
+    "...then press Reconnect. RECONNECT to try again.")."""
+    from dtscal_lib.sources.live import LiveStatus
+    from dtscal_lib.sources.ros_diagnosis import RECONNECT
+    from dtscal_lib.ui.render import source_status_html
+
+    for message in (f"nothing listens on port 11311 of duckie.local, {RECONNECT}", "the stream closed; press "
+                    "Reconnect to try again", "the recording ended"):
+        html = source_status_html("ros:duckie", LiveStatus(state, message, frames), {}, "Every sample is kept")
+        assert html.lower().count("reconnect") == 1, html
+        assert ".." not in html and ". ." not in html, html

@@ -60,7 +60,10 @@ def cmd_nbgrader(args) -> int:
     for p in export(args.nbgrader, repo_root=root):
         print(p)
     print(f"nbgrader course in {args.nbgrader}: cd there, then `nbgrader generate_assignment 01_pinhole_projection`"
-          " (one assignment per notebook); autograding needs the kit installed where nbgrader runs",
+          " (one assignment per notebook); autograding needs the kit installed where nbgrader runs. nbgrader's "
+          "autograde then warns \"Attribute 'checksum' for cell test_... has changed!\" for each test cell of each "
+          "student: that is nbgrader putting back the hidden tests it stripped from the students' copy "
+          "(jupyter/nbgrader#1961), not a student's tampering; a warning on any other cell is one",
           file=sys.stderr)
     return 0
 
@@ -124,6 +127,26 @@ def _check_outputs(args) -> None:
             safe_write.check(target, what=what)
 
 
+def _class_wide_notes(notes: dict[str, list[str]]) -> tuple[dict[str, list[str]], dict[str, list[str]]]:
+    """The notes of each student less those on the course's notebooks without an exercise (06, 03b: the same for
+    every student, said once for the class), and those: ``(row notes, {why: students})``. A student's own JSON
+    (Gradescope's output) keeps them."""
+    from .classroom import UNGRADED
+
+    whys = [why for _prefix, _word, why in UNGRADED]
+    rows: dict[str, list[str]] = {}
+    per_class: dict[str, list[str]] = {}
+    for student, said in notes.items():
+        rows[student] = []
+        for n in said:
+            why = next((w for w in whys if n.endswith(f"not graded: {w}")), None)
+            if why is None:
+                rows[student].append(n)
+            elif student not in per_class.setdefault(why, []):
+                per_class[why].append(student)
+    return rows, per_class
+
+
 def _grade_roster(args, r, material) -> int:
     from .grade import not_handed_in
     from .classroom import grade_all
@@ -131,8 +154,11 @@ def _grade_roster(args, r, material) -> int:
 
     for n in r.unplaced:
         print(f"not graded: {n}", file=sys.stderr)
+    row_notes, per_class = _class_wide_notes(r.notes)
+    for why, students in per_class.items():  # once for the class, not once per student (nor per CSV row)
+        print(f"not graded, for the whole class ({len(students)} student(s) handed it in): {why}", file=sys.stderr)
     for student in r.students:  # also in the CSV and JSON, next to the student's grades
-        for n in r.notes.get(student, []):
+        for n in row_notes.get(student, []):
             print(f"{student}: {n}", file=sys.stderr)
     from .sandbox import barriers
 
@@ -161,7 +187,7 @@ def _grade_roster(args, r, material) -> int:
                                                 for s, rs in sorted(by_student.items())},
                                    **({"not_graded": list(r.unplaced)} if r.unplaced else {}), "sandbox": held})
     if args.csv:
-        write_csv(args.csv, by_student, r.notes)
+        write_csv(args.csv, by_student, row_notes)
     if args.report:
         from .classreport import write_report
 

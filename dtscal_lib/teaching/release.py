@@ -57,6 +57,7 @@ from ..notebook_format import (  # noqa: F401 - the notebook format, as release'
     _where,
     find_regions,
 )
+from .handin import GIT_HANDIN
 
 #: first line of the stub that replaces a region (inject_solutions looks for it)
 STUB_COMMENT = "# YOUR CODE HERE: replace the next line with your code"
@@ -73,12 +74,13 @@ RELEASE_MARKER = ".dtscal-release"
 RELEASE_TREES = ("dtscal_lib", "data")
 RELEASE_FILES = ("pyproject.toml", "LICENSE")
 #: the hand-out's own README and one-command start (written by :func:`release`)
-#: kit files the hand-out carries as they are (notebook 06 and the robot's error messages name the first);
+#: kit files the hand-out carries (notebook 06 and the robot's error messages name the first; start.sh sources the
+#: second; the TA page loses its kit-only parts, :func:`handout_text`);
 #: every script a shipped script sources (install-ros.sh's apt-wait.sh) comes along (:func:`sourced_scripts`)
-RELEASE_EXTRA = ("scripts/install-ros.sh", "docs/ta.md")
+RELEASE_EXTRA = ("scripts/install-ros.sh", "scripts/install-course.sh", "docs/ta.md")
 #: the author of the hand-out's first commit: nobody's name, so the students' commits are theirs alone
 HANDOUT_AUTHOR = ("dtscal hand-out", "handout@dtscal.invalid")
-#: the hand-out is a git repository a GitHub Classroom push carries whole: the student's workspace
+#: the hand-out is a git repository the student's git hand-in pushes: the student's workspace
 #: (with workspace/.course/, which the next update needs) is in it, backups and the environment are not
 HANDOUT_GITIGNORE = """.venv/
 *.egg-info/
@@ -114,9 +116,10 @@ bash start.sh
 ```
 
 The first run makes a Python environment in `.venv/` and installs the course into it (under a minute
-with a fast connection; it prints each step and the installer, uv or else pip, lists each package); then
-JupyterLab opens at notebook 01. Later runs start in seconds. Options: `bash start.sh --no-browser` prints
-the address to open instead; `--port 8890` picks another port; `--setup-only` installs and stops.
+with a fast connection; it prints each step, a line every few seconds while a step goes on, and the
+installer, uv or else pip, lists each package); then JupyterLab opens at notebook 01. Later runs start in
+seconds. Options: `bash start.sh --no-browser` prints the address to open instead; `--port 8890` picks
+another port; `--setup-only` installs and stops; `bash start.sh --help` lists them all.
 
 ## Where you work
 
@@ -133,11 +136,17 @@ Add your own notes and scratch cells wherever you like: they are yours and stay 
 Your instructor says which of the two:
 
 * **A file** (Gradescope or an upload): run `bash start.sh --handin`. It writes `handin/NAME.zip` with
-  your seven workspace notebooks (NAME is your git name or login; `bash start.sh --handin --name "Ada
-  Lovelace"` sets it). Upload that zip as it is.
-* **GitHub Classroom**: this folder is a git repository and your work in `workspace/` is part of it.
-  Commit and push: `git add -A && git commit -m "hand in" && git push`. (Backups and `.venv/` are left
-  out by `.gitignore`.)
+  your seven workspace notebooks; the first time it asks your name and remembers it (`bash start.sh
+  --handin --name "Ada Lovelace"` gives or changes it, and replaces the zip: `handin/` holds one). Upload
+  that zip as it is.
+* **Git**: this folder is a git repository and your work in `workspace/` is part of it (backups and
+  `.venv/` are left out by `.gitignore`). Once: `git remote add origin ADDRESS` (the address your course
+  gives you) and, if git does not know you yet, `git config user.name "Your Name"` and `git config user.email
+  you@example.org`. Then, each time you hand in:
+
+  ```bash
+  {git_handin}
+  ```
 
 ## A new version of the course
 
@@ -163,97 +172,48 @@ bash start.sh
 
 and use `ros:ROBOT` as the source in notebook 06. If the robot does not answer, the status line says
 why and what to do. On macOS or Windows, and for everything a TA sets up, see `docs/ta.md`.
+""".replace("{git_handin}", GIT_HANDIN)
+#: what ``bash start.sh --help`` prints, at once (before any install), and every option of it works in the hand-out
+START_HELP = """usage: bash start.sh [--no-browser] [--port PORT] [--ip IP] [--update] [--setup-only]
+       bash start.sh --handin [--name "Your Name"] [--out FILE.zip]
+
+Open the course in JupyterLab at notebook 01 (the first run installs it into .venv, a minute or so).
+  --no-browser         print the address to open instead of opening a browser
+  --port PORT          serve on another port (default 8888)
+  --ip IP              listen on another address (0.0.0.0 in a container)
+  --update             carry your work into a corrected course (workspace/ copied in), then open it
+  --setup-only         install (and --update) without opening JupyterLab
+  --handin             write handin/NAME.zip, your workspace notebooks, to hand in (the name is asked once;
+                       --name "Your Name" changes it and replaces the zip)
+  --help               this text
 """
-START_SH = """#!/usr/bin/env bash
+START_SH = f"""#!/usr/bin/env bash
 # Start the course: make .venv on the first run, install the course into it, open JupyterLab at notebook 01.
-# Options go to `dtscal course`, e.g. --no-browser, --port 8890, --update; --handin writes handin/NAME.zip;
-# --setup-only installs (and --update merges) without opening JupyterLab.
-# The first run installs with uv (from PyPI, pip's resolver and indexes, many times faster); if uv cannot be had
-# or fails, with pip. DTSCAL_INSTALLER=pip uses pip alone.
+# Options: bash start.sh --help. The install (scripts/install-course.sh, shared with the kit's course command) is
+# uv's, else pip's, with a line per step and a line every 5 s while a step goes on.
 set -euo pipefail
 cd "$(dirname "$0")"
-PYTHON="${PYTHON:-python3}"
-say() { echo "start.sh: $*" >&2; }
-ticking() {  # ticking WHAT COMMAND...: run COMMAND, saying every 5 s that WHAT goes on (never silent for long)
-  local what=$1 rc=0 tick
-  shift
-  (n=0; while sleep 5; do n=$((n + 5)); say "... $what ($n s)"; done) &
-  tick=$!
-  trap 'kill "$tick" 2>/dev/null' EXIT
-  "$@" || rc=$?
-  kill "$tick" 2>/dev/null || true
-  wait "$tick" 2>/dev/null || true
-  trap - EXIT
-  return "$rc"
-}
-if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
-  say "needs Python 3.11 or newer; install it, or run: PYTHON=/path/to/python3.11 bash start.sh"
-  exit 2
-fi
-uv_env() {  # run uv with pip's own settings (index, extra indexes, find-links, constraints, certificate)
-  eval "$(.venv/bin/python - <<'PY'
-import shlex, subprocess, sys
-out = subprocess.run([sys.executable, "-m", "pip", "config", "list"], capture_output=True, text=True).stdout
-conf = {}
-for line in out.splitlines():  # section.key='value'; the environment (:env:) and install.* win over global.*
-    key, _, value = line.partition("=")
-    section, _, name = key.rpartition(".")
-    rank = {":env:": 3, "install": 2}.get(section, 1)
-    if value and rank >= conf.get(name, (0, ""))[0]:
-        conf[name] = (rank, value.strip("'\\""))
-uv = {"index-url": "UV_INDEX_URL", "extra-index-url": "UV_EXTRA_INDEX_URL", "find-links": "UV_FIND_LINKS",
-      "constraint": "UV_CONSTRAINT", "cert": "SSL_CERT_FILE", "trusted-host": "UV_INSECURE_HOST",
-      "timeout": "UV_HTTP_TIMEOUT", "default-timeout": "UV_HTTP_TIMEOUT"}
-for name, (_rank, value) in conf.items():
-    if name == "no-index" and value.lower() in ("1", "true", "yes", "on"):
-        print('set -- "$@" --no-index')  # uv has no variable for it: the flag, after uv's other arguments
-    elif name in uv:
-        value = ",".join(value.split()) if name == "find-links" else value
-        print(f"export {uv[name]}={shlex.quote(value)}")
-print("export UV_INDEX_STRATEGY=unsafe-best-match")  # pip's rule: the best version over every index
-PY
-)"
-  .venv/bin/uv "$@"
-}
-if ! .venv/bin/python -c 'import dtscal_lib, jupyterlab' 2>/dev/null; then
-  say "first run: installing the course into .venv (3 steps; under a minute with the packages cached)"
-  if [ ! -x .venv/bin/python ]; then
-    say "[1/3] making the course's Python environment in .venv"
-    ticking "making .venv" "$PYTHON" -m venv .venv
-  else
-    say "[1/3] .venv is there; completing it"
-  fi
-  installed=""
-  if [ "${DTSCAL_INSTALLER:-uv}" = uv ]; then
-    say "[2/3] getting the uv installer from PyPI into .venv (pip)"
-    if ticking "getting uv" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on uv; then
-      say "[3/3] installing the course, JupyterLab and OpenCV with uv (it lists each package)"
-      if ticking "installing with uv" uv_env pip install --python .venv/bin/python -e .; then
-        installed=uv
-      else
-        say "uv could not install the course; trying pip instead"
-      fi
-    else
-      say "uv is not available for this computer; installing with pip instead"
-    fi
-  fi
-  if [ -z "$installed" ]; then
-    say "[2/3] updating pip"
-    ticking "updating pip" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on --upgrade pip
-    say "[3/3] installing the course, JupyterLab and OpenCV with pip (pip lists each package)"
-    ticking "installing with pip" .venv/bin/python -m pip install --disable-pip-version-check --progress-bar on -e .
-  fi
-  say "installed"
-fi
-if [ "${1:-}" = "--handin" ]; then
+case "${{1:-}}" in
+  -h|--help) cat <<'HELP'
+{START_HELP}HELP
+    exit 0 ;;
+esac
+WHO=start.sh
+source scripts/install-course.sh  # after the cd: wherever start.sh was called from
+course_installed || install_course
+if [ "${{1:-}}" = "--handin" ]; then
   shift
   exec .venv/bin/dtscal handin "$@"
 fi
 args=()
 for a in "$@"; do
-  if [ "$a" = "--setup-only" ]; then args+=("--no-open"); else args+=("$a"); fi
+  case "$a" in
+    --setup-only) args+=("--no-open") ;;
+    --instructor|--no-open) say "unknown option $a; see: bash start.sh --help"; exit 2 ;;
+    *) args+=("$a") ;;
+  esac
 done
-exec .venv/bin/dtscal course ${args[@]+"${args[@]}"}
+exec .venv/bin/dtscal course ${{args[@]+"${{args[@]}}"}}
 """
 
 # --------------------------------------------------------------------------- regions
@@ -497,6 +457,8 @@ def release(out_dir, repo_root=None) -> Path:
             for g in (f, *sourced_scripts(root, f)):
                 (out / g).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(root / g, out / g)
+                if g.endswith(".md"):
+                    (out / g).write_text(handout_text((root / g).read_text(encoding="utf-8")), encoding="utf-8")
     (out / RELEASE_MARKER).write_text("written by `dtscal release`; safe to delete and regenerate\n")
     leaks = find_solution_leaks(out, sources)
     if leaks:
@@ -506,6 +468,34 @@ def release(out_dir, repo_root=None) -> Path:
         )
     _git_init(out)
     return out
+
+
+#: a part of a kit page the hand-out leaves out: what needs the instructor's kit (its tests, benchmarks, the
+#: grader, the hub's set-up scripts), which a hand-out reader could not run or find
+KIT_ONLY_BEGIN, KIT_ONLY_END = "<!-- kit only -->", "<!-- /kit only -->"
+
+
+def handout_text(text: str) -> str:
+    """A kit page as the hand-out ships it: every ``<!-- kit only -->`` ... ``<!-- /kit only -->`` part left out.
+
+    Raises
+    ------
+    DtscalError
+        On a part that is opened and never closed, or closed without being opened.
+    """
+    kept, inside = [], False
+    for n, line in enumerate(text.split("\n"), 1):
+        mark = line.strip()
+        if mark in (KIT_ONLY_BEGIN, KIT_ONLY_END):
+            if (mark == KIT_ONLY_BEGIN) == inside:
+                raise DtscalError(f"line {n}: {mark} {'inside' if inside else 'outside'} a kit-only part; "
+                                  f"pair each {KIT_ONLY_BEGIN} with a {KIT_ONLY_END}")
+            inside = not inside
+        elif not inside:
+            kept.append(line)
+    if inside:
+        raise DtscalError(f"a {KIT_ONLY_BEGIN} part is never closed; add {KIT_ONLY_END}")
+    return re.sub(r"\n{3,}", "\n\n", "\n".join(kept))
 
 
 #: ``source "$(dirname "$0")/x.sh"`` or ``. "$(dirname "$0")/x.sh"``: a script beside the script

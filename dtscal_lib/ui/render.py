@@ -175,11 +175,14 @@ def source_status_html(spec: str, status, bad: dict, kept: str) -> str:
     """
     waiting = status.state == "connecting" and status.message and not status.message.startswith("connecting to ")
     never = status.frames == 0  # a source that never sent a frame was never connected: it cannot be "lost"
+    said = (status.message or "").rstrip(". ")
+    # the button's advice once: a message that already says to press Reconnect (the ROS diagnosis) keeps its own
+    own = "press reconnect" in said.lower()
     text = {"connecting": f"waiting for {spec}: {status.message}" if waiting else f"connecting to {spec} ...",
             "running": f"live: {spec}",
-            "ended": f"source ended: {status.message}. {kept}; RECONNECT to go on.",
-            "error": (f"could not connect to {spec}: {status.message}. RECONNECT to try again." if never else
-                      f"source lost: {status.message}. {kept}; RECONNECT when it is back.")}.get(
+            "ended": f"source ended: {said}. {kept}" + ("." if own else "; RECONNECT to go on."),
+            "error": (f"could not connect to {spec}: {said}." + ("" if own else " RECONNECT to try again.") if never
+                      else f"source lost: {said}. {kept}" + ("." if own else "; RECONNECT when it is back."))}.get(
         status.state, status.message)
     if bad:
         text += " (skipped frames: " + ", ".join(f"{k} {v}" for k, v in sorted(bad.items())) + ")"
