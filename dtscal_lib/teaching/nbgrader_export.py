@@ -30,8 +30,8 @@ from pathlib import Path
 import nbformat
 
 from ..errors import DtscalError
-from .release import (BEGIN, END, EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG, _read, _solution_paths, _tags,
-                      _validate_cells, find_regions)
+from .release import (BEGIN, END, EXERCISE_TAG, IMPORTS_TAG, PRACTICE_TAG, SOLUTION_ONLY_TAG, _read, _solution_paths,
+                      _tags, _validate_cells, find_regions)
 
 BEGIN_HIDDEN, END_HIDDEN = "### BEGIN HIDDEN TESTS", "### END HIDDEN TESTS"
 SCHEMA_VERSION = 3
@@ -111,7 +111,7 @@ def source_notebook(nb, assignment: str, *, functions: tuple[str, ...], checks: 
             continue
         if cell.cell_type == "code":
             new = nbformat.v4.new_code_cell(cell.source)
-            if EXERCISE_TAG in tags:
+            if EXERCISE_TAG in tags or PRACTICE_TAG in tags:  # practice: a solution cell without points
                 find_regions(cell.source, f"{assignment}, cell {i}")  # balanced, nbgrader's own markers
                 func = next((f for f in functions if f"def {f}(" in cell.source), f"exercise-{i}")
                 new.metadata = nbformat.from_dict(_md("solution", f"solution_{func}", tags=tags))

@@ -22,6 +22,9 @@ Cell conventions the tools rely on (``cell.metadata.tags``):
   it may use only ``np``, ``cv2``, ``math`` and other exercise functions of the
   notebook, so :func:`solution_functions` can run the imports cell plus the exercise
   cells without the rest of the notebook;
+* ``practice`` - a function (or a few) the student writes for their own analysis, with a self-check in
+  the notebook but never graded: solution regions become stubs as in ``exercise`` cells, and the
+  grader, :func:`solution_functions` and the nbgrader points leave them out;
 * ``solution_only`` - (optional) a cell dropped from the student version entirely.
 """
 
@@ -49,6 +52,10 @@ STUB_COMMENT = "# YOUR CODE HERE: replace the next line with your code"
 #: the student's region in a generated notebook (carried over by ``dtscal course --update``)
 BEGIN_YOURS, END_YOURS = "### BEGIN YOUR CODE", "### END YOUR CODE"
 EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG = "exercise", "imports", "solution_only"
+#: cells whose solution regions the student writes for practice (stubbed, self-checked, never graded)
+PRACTICE_TAG = "practice"
+#: the tags of cells that may hold solution regions
+REGION_TAGS = (EXERCISE_TAG, PRACTICE_TAG)
 #: cell metadata the student version keeps; everything else (execution timings, scroll
 #: state, collapsed flags...) is dropped
 KEEP_CELL_METADATA = ("tags", "editable", "deletable")
@@ -368,10 +375,13 @@ def _validate_cells(nb: NotebookNode, name: str) -> None:
                 f"{_where(name, i)}: an 'exercise' cell must hold exactly one solution region "
                 f"('{BEGIN}' ... '{END}'), found {len(regions)}"
             )
-        if regions and EXERCISE_TAG not in _tags(cell):
+        if PRACTICE_TAG in _tags(cell) and not regions:
+            raise DtscalError(f"{_where(name, i)}: a 'practice' cell must hold a solution region "
+                              f"('{BEGIN}' ... '{END}'), found none")
+        if regions and not any(t in _tags(cell) for t in REGION_TAGS):
             raise DtscalError(
-                f"{_where(name, i)}: a solution region outside an 'exercise' cell; tag the cell "
-                "'exercise' (cell.metadata.tags) so the tools can find it"
+                f"{_where(name, i)}: a solution region outside an 'exercise' or 'practice' cell; tag the cell "
+                "'exercise' (graded) or 'practice' (not graded) in cell.metadata.tags so the tools can find it"
             )
 
 

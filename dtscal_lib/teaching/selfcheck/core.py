@@ -16,7 +16,15 @@ PASS, FAIL, NOT_IMPLEMENTED = "pass", "fail", "not implemented yet"
 
 
 class CheckFailed(AssertionError):
-    """Raised by a case to fail it with a message for the student."""
+    """Raised by a case to fail it with a message for the student.
+
+    ``hint`` names what to do about THIS failure (a wrong shape, a flipped sign) and replaces the case's
+    general hint, which is about the case's values: a student sees only the hint about the mistake made.
+    """
+
+    def __init__(self, message: str = "", *, hint: str | None = None):
+        super().__init__(message)
+        self.hint = hint
 
 
 @dataclass
@@ -87,7 +95,7 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
             report.results = [CaseResult(case.title, NOT_IMPLEMENTED)]
             break
         except CheckFailed as exc:
-            report.results.append(CaseResult(case.title, FAIL, str(exc), case.hint))
+            report.results.append(CaseResult(case.title, FAIL, str(exc), case.hint if exc.hint is None else exc.hint))
         except Exception as exc:  # student code may raise anything
             tb = traceback.extract_tb(exc.__traceback__)
             where = f" (line {tb[-1].lineno} in {tb[-1].name})" if tb else ""
