@@ -391,7 +391,7 @@ def student_notebook(solution_nb: NotebookNode, name: str | None = None) -> Note
     Regions become ``raise NotImplementedError`` stubs, cells tagged ``solution_only``
     are dropped, outputs are cleared, execution counts set to ``None``, cell metadata
     reduced to :data:`KEEP_CELL_METADATA` and notebook metadata to the kernel spec and
-    language name. The input is not modified; the result depends only on the input.
+    the kernel's language_info. The input is not modified; the result depends only on the input.
 
     Parameters
     ----------
@@ -427,9 +427,12 @@ def student_notebook(solution_nb: NotebookNode, name: str | None = None) -> Note
     meta = {}
     if "kernelspec" in solution_nb.metadata:
         meta["kernelspec"] = dict(solution_nb.metadata.kernelspec)
-    lang = solution_nb.metadata.get("language_info", {}).get("name")
-    if lang:
-        meta["language_info"] = {"name": lang}
+    lang = solution_nb.metadata.get("language_info", {})
+    if lang.get("name"):
+        # whole, as the kernel reports it: JupyterLab writes the kernel's language_info into a notebook it opens,
+        # so a name alone opens every untouched notebook as modified (issue 29; jupyter/notebook issue 2123: a
+        # Python of another version than the one that ran the solutions still does)
+        meta["language_info"] = copy.deepcopy(dict(lang))
     nb.metadata = nbformat.from_dict(meta)
     return nb
 
