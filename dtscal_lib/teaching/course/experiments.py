@@ -22,7 +22,6 @@ import numpy as np
 from ... import camera as cam
 from ...boards import DUCKIETOWN_BOARD, Board
 from ...duckietown import IMAGE_SIZE
-from ...errors import DtscalError
 from ...homography import apply_homography
 from .figure import new_figure, png_bytes
 from .homography import unnormalized_dlt

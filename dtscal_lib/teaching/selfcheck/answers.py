@@ -97,9 +97,9 @@ def _why_tilt40(m, p, f):
 
 # ----------------------------------------------------------------------------------------------- 02
 def _why_residual(m, p, f):
-    text = (f"the best homography leaves {f['rms']:.2f} px RMS on frame {f['frame']}. A homography is a pinhole model; "
-            "the Duckiebot's wide lens bends the board's rows, and the best H can only compromise. The residual is "
-            "the lens, not the detector (whose corners are good to about 0.1 px): notebook 04 models it.")
+    text = (f"the best homography leaves {f['rms']:.2f} px RMS on frame {f['frame']}. The Duckiebot's wide lens bends "
+            "the board's rows, which no 3x3 matrix can do, so the best H can only compromise. The residual is the "
+            "lens, not the detector (whose corners are good to about 0.1 px): notebook 04 models it.")
     if p is not None and str(p).strip().lower() == "below 0.1 px":
         text += " 'below 0.1 px' is the detector's accuracy: it would hold for a pinhole camera, not for this lens."
     return text
@@ -145,9 +145,9 @@ def _why_fronto(m, p, f):
 
 
 def _why_closed_form(m, p, f):
-    return (f"the closed form misses the true K by {f['err_px']:.1f} px here. The corners are accurate to a fraction "
-            "of a pixel, but Zhang's equations assume a pinhole; the lens's barrel distortion makes every homography "
-            "a compromise (next cell).")
+    return (f"the closed form misses the true K by {f['err_px']:.1f} px here, a hundred times the corner noise. "
+            "Zhang's equations assume a pinhole; the lens's barrel distortion makes every homography a compromise "
+            "(next cell).")
 
 
 # ----------------------------------------------------------------------------------------------- 03b
@@ -213,8 +213,8 @@ def _why_height(m, p, f):
 
 
 def _why_pitch(m, p, f):
-    text = ("the optical axis in the robot frame is the third row of R; its z component is minus the sine of the "
-            "pitch. A steeper camera sees the road closer to the wheels.")
+    text = ("R's third row is where the camera looks, written in the robot's axes; its z component, -sin(pitch), says "
+            "how far below the horizon. A steeper camera sees the road closer to the wheels.")
     if _near(p, math.radians(m), 0.05):
         text += f" Your {_yours(p, 'deg', 2)} is the pitch in radians: the question asks for degrees."
     elif _near(p, -m, 5):

@@ -178,8 +178,14 @@ def check_next_board_move(fn: Callable) -> Report:
                 raise CheckFailed(f"returned {got!r}; answer one of 'left', 'right', 'up', 'down', 'closer', 'tilt'",
                                   hint="return the move as one of the six words, a plain string")
             if got != want:
-                raise CheckFailed(f"for bars {[(b.name, round(b.progress, 2)) for b in _bars(values)]} returned "
-                                  f"{got!r}, expected {want!r}")
+                bars = _bars(values)
+                shown = [(b.name, round(b.progress, 2)) for b in bars]
+                emptiest = min(bars, key=lambda b: b.progress)
+                moved = next(name for name, moves in MOVES.items() if got in moves)
+                hint = None if moved == emptiest.name else (
+                    f"pick the bar with the SMALLEST progress (here {emptiest.name}: {emptiest.progress:.2f}), not "
+                    f"another one that is not full ({moved}: {next(b.progress for b in bars if b.name == moved):.2f})")
+                raise CheckFailed(f"for bars {shown} returned {got!r}, expected {want!r}", hint=hint)
         return run
 
     return run_check("next_board_move", fn, [
@@ -189,7 +195,7 @@ def check_next_board_move(fn: Callable) -> Report:
         Case("the top never seen: go up", case([(0.0, 1.0), (0.4, 0.95), (0.0, 0.4), (0.0, 0.5)], "up"),
              hint="Y works like X: 0 is the top of the image"),
         Case("boards all far away: come closer", case([(0.0, 1.0), (0.0, 1.0), (0.0, 0.1), (0.0, 0.3)], "closer"),
-             hint="pick the bar with the SMALLEST progress (here Size: 0.25), not the first bar that is not full"),
+             hint="Size fills as the board comes closer (its largest size seen so far)"),
         Case("boards never tilted: tilt", case([(0.05, 0.9), (0.1, 0.9), (0.0, 0.3), (0.0, 0.05)], "tilt"),
-             hint="Skew fills as the board is tilted; its progress here is 0.1, the smallest"),
+             hint="Skew fills as the board is tilted"),
     ])
