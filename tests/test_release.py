@@ -82,7 +82,7 @@ def test_bad_markers_name_the_notebook_and_cell(source, words):
 
 
 def test_markers_outside_exercise_cells_are_errors():
-    with pytest.raises(DtscalError, match="outside an 'exercise' cell"):
+    with pytest.raises(DtscalError, match="outside an 'exercise' or 'practice' cell"):
         rel.student_notebook(toy(extra_cells=[new_code_cell("### BEGIN SOLUTION\nx = 1\n### END SOLUTION")]),
                              name="t")
     with pytest.raises(DtscalError, match="markdown cell"):
