@@ -11,8 +11,8 @@ import math
 import numpy as np
 
 from dtscal_lib import camera as cam
-from dtscal_lib.teaching.selfcheck import (check_camera_height_pitch, check_next_board_move, check_per_view_rms,
-                                           check_rectification_maps)
+from dtscal_lib.teaching.selfcheck import (check_camera_height_pitch, check_coverage, check_next_board_move,
+                                           check_per_view_rms, check_rectification_maps)
 from dtscal_lib.teaching.selfcheck import distortion as dist_checks
 from dtscal_lib.teaching.selfcheck import ground as ground_checks
 
@@ -99,3 +99,10 @@ def test_practice_checks_name_the_mistake(capsys):
     first_not_full = check_next_board_move(lambda bars: {"X": "left", "Y": "up", "Size": "closer", "Skew": "tilt"}[
         next(b.name for b in bars if not b.full)])
     assert any("SMALLEST progress" in h for _t, h in _hints(first_not_full))
+
+
+def test_coverage_hints_name_the_mistake_made(capsys):
+    no_abs = _hints(check_coverage(lambda e, s, k=1.0: float(np.mean(np.asarray(e) <= k * np.asarray(s)))))
+    assert no_abs and all("absolute value" in h for _t, h in no_abs), no_abs
+    no_k = check_coverage(lambda e, s, k=1.0: float(np.mean(np.abs(e) <= np.asarray(s))))
+    assert [h for _t, h in _hints(no_k)] == ["use k: the bound is k * sigma, not sigma"]

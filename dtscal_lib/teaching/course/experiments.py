@@ -28,8 +28,8 @@ from .homography import unnormalized_dlt
 from .projection import look_at_pose
 
 __all__ = ["span_at_yaw", "invariance_experiment", "invariance_table", "dlt_column_range", "off_plane_experiment",
-           "lift_shift_px", "pitch_cost_mm",
-           "degenerate_views", "zhang_constraints", "field_of_view", "corner_shift_px", "fixed_point_converged",
+           "lift_shift_px", "pitch_cost_mm", "degenerate_views", "zhang_constraints", "sigma_trials", "field_of_view",
+           "corner_shift_px", "fixed_point_converged",
            "line_bend_px", "lens_explorer", "camera_height_pitch", "pixel_footprint_mm", "yaw_cost_mm",
            "lane_markings_on_ground"]
 
@@ -147,6 +147,29 @@ def dlt_column_range(offset: float, n_points: int = 35, seed: int = 2) -> tuple[
 
 
 # --------------------------------------------------------------------------------------------- notebook 03
+def sigma_trials(views, n_views: int = 8, trials: int = 12, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Calibrate ``trials`` random subsets of ``n_views`` views; the errors against the truth and the reported sigmas.
+
+    Each subset gets the kit's full calibration (``plumb_bob``); returned are the errors of fx, fy, cx, cy against
+    ``views.K_true`` and the standard deviations the calibration reports for them (``result.std``), both
+    (trials, 4). If the sigmas are honest, about 68 % of the errors lie within 1 sigma and 95 % within 2.
+    """
+    from ...calibration import calibrate
+
+    if not 3 <= n_views <= views.n_views:
+        raise ValueError(f"n_views must be 3 to {views.n_views} (the views there are), got {n_views}")
+    rng = np.random.default_rng(seed)
+    K = np.asarray(views.K_true, dtype=float)
+    errors, sigmas = [], []
+    for _ in range(int(trials)):
+        pick = rng.choice(views.n_views, int(n_views), replace=False)
+        r = calibrate([views.object_points[i] for i in pick], [views.image_points[i] for i in pick], views.size,
+                      model="plumb_bob")
+        errors.append([r.K[0, 0] - K[0, 0], r.K[1, 1] - K[1, 1], r.K[0, 2] - K[0, 2], r.K[1, 2] - K[1, 2]])
+        sigmas.append([r.std[k] for k in ("fx", "fy", "cx", "cy")])
+    return np.array(errors), np.array(sigmas)
+
+
 def _rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
     a, b = math.radians(yaw_deg), math.radians(pitch_deg)
     Ry = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])

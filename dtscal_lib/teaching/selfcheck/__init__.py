@@ -50,6 +50,7 @@ from .distortion import (  # noqa: E402
 )
 from .ground import check_board_ground_points, check_camera_height_pitch, check_pixel_to_ground  # noqa: E402
 from .practice import (  # noqa: E402
+    check_coverage,
     check_next_board_move,
     check_per_view_rms,
     check_picture_difference,

@@ -21,7 +21,7 @@ from ...poses import look_at_pose
 from .core import Case, CheckFailed, Report, expect_close, run_check
 
 __all__ = ["check_picture_difference", "check_tilt_needed", "check_per_view_rms", "check_worst_views",
-           "check_next_board_move", "MOVES"]
+           "check_coverage", "check_next_board_move", "MOVES"]
 
 
 # --------------------------------------------------------------------------- notebook 01
@@ -149,6 +149,38 @@ def check_worst_views(fn: Callable) -> Report:
              hint="np.argsort sorts ascending: reverse it ([::-1]) for the worst first, then keep n"),
         Case("n = 1", case(1, [4]), hint="return a list (or array) of n indices, even for n = 1"),
     ])
+
+
+def check_coverage(fn: Callable) -> Report:
+    """Check ``coverage(errors, sigmas, k) -> float``: the fraction of ``|error| <= k sigma``, over every entry."""
+    errors = np.array([[0.5, -2.0], [1.5, -0.2], [-3.0, 0.9]])
+    sigmas = np.array([[1.0, 1.0], [1.0, 0.5], [1.0, 1.0]])
+
+    def case(k, want):
+        def run(f):
+            got = f(errors.copy(), sigmas.copy(), k)
+            if np.ndim(got) != 0:
+                raise CheckFailed(f"should return one fraction, got shape {np.shape(got)}",
+                                  hint="average over every entry (all trials and all parameters): np.mean(...)")
+            if abs(float(got) - want) > 1e-12 and abs(float(got) - 100 * want) < 1e-9:
+                raise CheckFailed(f"got {got}, a percentage; expected the fraction {want}",
+                                  hint="return a fraction between 0 and 1, not a percentage")
+            mistakes = {float(np.mean(errors <= k * sigmas)): ABS_HINT, float(np.mean(np.abs(errors) <= sigmas)): K_HINT}
+            if abs(float(got) - want) > 1e-12:
+                hint = next((h for v, h in mistakes.items() if abs(float(got) - v) < 1e-12 and abs(v - want) > 1e-12),
+                            None)
+                raise CheckFailed(f"coverage at k = {k}: got {float(got):.4g}, expected {want:.4g}", hint=hint)
+        return run
+
+    return run_check("coverage", fn, [
+        Case("1 sigma: 3 of 6 errors", case(1.0, 0.5), hint="count the entries with |error| <= k * sigma, divide by "
+             "how many there are"),
+        Case("2 sigma: 5 of 6 errors", case(2.0, 5 / 6), hint="count the entries with |error| <= k * sigma"),
+    ])
+
+
+ABS_HINT = "an error counts when |error| <= k * sigma: take the absolute value, errors can be negative"
+K_HINT = "use k: the bound is k * sigma, not sigma"
 
 
 # --------------------------------------------------------------------------- notebook 06
