@@ -309,6 +309,16 @@ def test_every_notebook_states_its_time_and_it_is_at_most_90_minutes(name):
             assert sum(numbers) == minutes, f"{name}: the parts {numbers} do not add up to {minutes} minutes"
 
 
+@pytest.mark.parametrize("name", sorted(CLAIMS))
+def test_the_estimate_states_the_measured_run_beside_it_and_what_was_not_measured(name):
+    """Issue 29: time estimates from a measured run, the range beside the estimate, honest about what was measured."""
+    top = nbformat.read(str(SOLUTIONS / name), as_version=4).cells[0].source
+    m = re.search(r"\*Measured \(issue 29\): run from its student version with the solutions pasted in, this "
+                  r"notebook's code took (\d+)-(\d+) s of computing", top.replace("\n", " "))
+    assert m and int(m.group(1)) <= int(m.group(2)), f"{name}: no measured range beside the estimate"
+    assert "no student was timed" in top and "benchmarks/bench_notebooks.py" in top
+
+
 def test_the_course_has_a_notebook_per_part_of_split_notebook_03():
     assert {"03_intrinsic_calibration.ipynb", "03b_calibration_quality.ipynb"} <= set(ALL_NOTEBOOKS)
     assert (SOLUTIONS.parent / "notebooks" / "03b_calibration_quality.ipynb").exists()
