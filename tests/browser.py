@@ -7,7 +7,14 @@ failure, elsewhere a skip.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import secrets
 import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 from ci import in_ci  # noqa: F401 - the one CI rule; re-exported for the browser tests
@@ -63,3 +70,38 @@ def open_notebook(page, url: str, *, timeout_ms: int = 120_000, dialog_ms: int =
     except Exception:  # no dialog: the kernel was chosen already
         pass
     page.wait_for_selector("#jp-main-statusbar :text('Idle')", timeout=timeout_ms)
+
+
+@contextlib.contextmanager
+def jupyterlab(tmp_path: Path, files):
+    """JupyterLab on 127.0.0.1 serving a temporary root that holds copies of ``files``; yields (url, token, root).
+
+    Its configuration, runtime and workspace folders are fresh ones under ``tmp_path`` (nothing of the user's)."""
+    root = tmp_path / "root"
+    root.mkdir()
+    for f in files:
+        shutil.copy(f, root / Path(f).name)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    token = secrets.token_hex(16)
+    env = dict(os.environ, HOME=str(tmp_path / "home"), JUPYTER_CONFIG_DIR=str(tmp_path / "jcfg"),
+               JUPYTER_RUNTIME_DIR=str(tmp_path / "jrun"), JUPYTERLAB_WORKSPACES_DIR=str(tmp_path / "jws"))
+    log = open(tmp_path / "jupyterlab.log", "w")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1", f"--port={port}",
+         f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}", "--ServerApp.open_browser=False",
+         "--allow-root",
+         "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"],
+        cwd=root, env=env, stdout=log, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        wait_until_it_answers(f"{url}/api/status?token={token}", proc, tmp_path / "jupyterlab.log", "JupyterLab")
+        yield url, token, root
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()

@@ -14,12 +14,6 @@ the system's temporary folder (the path is printed).
 from __future__ import annotations
 
 import contextlib
-import os
-import secrets
-import shutil
-import socket
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,7 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser import in_ci, launch_chromium, open_notebook, wait_until_it_answers
+import browser
+from browser import in_ci, launch_chromium, open_notebook
 from dtscal_lib import calib_files, datasets, ground
 
 pytestmark = pytest.mark.slow
@@ -69,12 +64,6 @@ def _playwright():
     return sync_playwright
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture()
 def lab(tmp_path):
     """JupyterLab on 127.0.0.1 with a temporary root holding notebook 06; yields (url, token, root)."""
@@ -85,30 +74,8 @@ def lab(tmp_path):
 @contextlib.contextmanager
 def jupyterlab(tmp_path: Path):
     """JupyterLab on 127.0.0.1 with a temporary root holding notebook 06 (also used by benchmarks/bench_browser.py)."""
-    root = tmp_path / "root"
-    root.mkdir()
-    shutil.copy(NOTEBOOK, root / NOTEBOOK.name)
-    port, token = _free_port(), secrets.token_hex(16)
-    env = dict(os.environ, HOME=str(tmp_path / "home"), JUPYTER_CONFIG_DIR=str(tmp_path / "jcfg"),
-               JUPYTER_RUNTIME_DIR=str(tmp_path / "jrun"), JUPYTERLAB_WORKSPACES_DIR=str(tmp_path / "jws"))
-    log = open(tmp_path / "jupyterlab.log", "w")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1", f"--port={port}",
-         f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}", "--ServerApp.open_browser=False",
-         "--allow-root",
-         "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"],
-        cwd=root, env=env, stdout=log, stderr=subprocess.STDOUT)
-    url = f"http://127.0.0.1:{port}"
-    try:
-        wait_until_it_answers(f"{url}/api/status?token={token}", proc, tmp_path / "jupyterlab.log", "JupyterLab")
-        yield url, token, root
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        log.close()
+    with browser.jupyterlab(tmp_path, [NOTEBOOK]) as running:
+        yield running
 
 
 def _scroll_to(locator) -> None:

@@ -166,6 +166,12 @@ def test_line_bend_scores_what_the_picture_shows():
     assert near < min(bend[(-0.24, 0.045)], bend[(-0.28, 0.045)], bend[(-0.26, 0.06)])
 
 
+def test_the_games_lens_is_straightened_by_its_own_coefficients_only():
+    K, lens = dt.default_K(), experiments.mystery_lens()
+    assert experiments.line_bend_px(K, lens, lens[0], lens[1], step=4) < 1e-6
+    assert experiments.line_bend_px(K, lens, *dt.default_dist()[:2], step=4) > 0.5  # not the recorded camera's
+
+
 def test_pitch_cost_follows_the_ray_geometry():
     h, x = 0.104, 0.5
     want = 1000 * (h / math.tan(math.atan(h / x) - math.radians(1.0)) - x)  # the same ray, 1 deg flatter

@@ -205,7 +205,12 @@ def _claims_04(nb) -> None:
     bends = dict(re.findall(r"^(no correction|your guess)\s.*lines bend by\s+([0-9.]+) px \(RMS\)", text,
                             re.MULTILINE))
     assert float(bends["your guess"]) < float(bends["no correction"]) and "my_k1, my_k2 = -0.10, 0.0" in code
-    assert "the calibrated lens" not in text and "experiments.lens_explorer(K, dist, k1=my_k1, k2=my_k2)" in code
+    assert "the calibrated lens" not in text and "experiments.lens_explorer(K, lens, k1=my_k1, k2=my_k2)" in code
+    from dtscal_lib.teaching.course.experiments import mystery_lens  # the game's lens: printed nowhere
+
+    k1 = mystery_lens()[0]
+    assert "lens = experiments.mystery_lens()" in code
+    assert not re.search(rf"{k1:.2f}(?![0-9])|{k1:.3f}", prose + code + text)
     assert "lens explorer: sliders for k1 and k2" in text
 
 

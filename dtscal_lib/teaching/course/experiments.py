@@ -30,7 +30,8 @@ from .projection import look_at_pose
 __all__ = ["span_at_yaw", "invariance_experiment", "invariance_table", "dlt_column_range", "off_plane_experiment",
            "lift_shift_px", "pitch_cost_mm", "degenerate_views", "zhang_constraints", "sigma_trials", "field_of_view",
            "corner_shift_px", "fixed_point_converged",
-           "line_bend_px", "lens_explorer", "camera_height_pitch", "pixel_footprint_mm", "yaw_cost_mm",
+           "line_bend_px", "mystery_lens", "lens_explorer", "camera_height_pitch", "pixel_footprint_mm",
+           "yaw_cost_mm",
            "lane_markings_on_ground"]
 
 
@@ -305,6 +306,16 @@ def line_bend_px(K, dist, k1: float, k2: float, size: tuple[int, int] = IMAGE_SI
     return float(np.mean(bends)) if bends else 0.0
 
 
+def mystery_lens() -> np.ndarray:
+    """The lens of notebook 04's straighten-the-lines game: ``(k1, k2, p1, p2, k3)``, printed nowhere in the notebook.
+
+    A wide lens of the Duckiebot's kind (barrel, k1 < 0 and a small positive k2; Duckietown's per-robot files have k1
+    around -0.27), made up for the game and not the recorded camera's, whose coefficients the notebook prints at its
+    top: the student finds it by making the lines straight, not by reading it off.
+    """
+    return np.array([-0.21, 0.03, 0.0, 0.0, 0.0])
+
+
 def lens_explorer(K, dist, size: tuple[int, int] = IMAGE_SIZE, *, k1: float = 0.0, k2: float = 0.0):
     """Sliders for k1 and k2: a grid of straight lines seen through the true lens, undone with the sliders'
     guess, redrawn live; the line under it gives the remaining bend (:func:`line_bend_px`). The sliders start at
@@ -323,7 +334,7 @@ def lens_explorer(K, dist, size: tuple[int, int] = IMAGE_SIZE, *, k1: float = 0.
 
     class LensBox(widgets.VBox):
         def __repr__(self) -> str:
-            return ("lens explorer: sliders for k1 and k2 undo the Duckiebot lens on a grid of straight lines "
+            return ("lens explorer: sliders for k1 and k2 undo a wide lens on a grid of straight lines "
                     "(needs a running Jupyter kernel)")
 
     fs = dict(continuous_update=False, style={"description_width": "40px"}, layout=widgets.Layout(width="360px"))
