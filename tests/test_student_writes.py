@@ -59,3 +59,19 @@ def test_practice_functions_are_stubbed_checked_and_used_only_once_they_pass(nam
     graded = release.solution_functions(SOLUTIONS / name) if any(
         release.EXERCISE_TAG in c.metadata.get("tags", []) for c in nb.cells) else {}
     assert not set(graded) & set(_written(nb, [release.PRACTICE_TAG])), "a practice function is graded"
+
+
+def test_practice_checks_never_raise_even_when_nbval_grades_strictly(monkeypatch, capsys):
+    """nbval with DTSCAL_STRICT=1 is an autograder (test_grading_nbval): it must not fail a notebook whose exercises
+    pass because a practice function is not written."""
+    from dtscal_lib.teaching.selfcheck import practice
+
+    monkeypatch.setenv("DTSCAL_STRICT", "1")
+
+    def stub(*args, **kwargs):
+        raise NotImplementedError
+
+    for check in (practice.check_picture_difference, practice.check_tilt_needed, practice.check_per_view_rms,
+                  practice.check_worst_views, practice.check_coverage, practice.check_next_board_move):
+        assert check(stub).status == "not implemented yet"
+        assert not check(lambda *a, **k: 0).passed  # wrong, and still no exception

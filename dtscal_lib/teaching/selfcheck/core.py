@@ -80,8 +80,11 @@ class Report:
         return self.text()
 
 
-def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) -> Report:
+def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True, graded: bool = True) -> Report:
     """Run ``cases`` against the student's ``fn``; print and return the :class:`Report`.
+
+    ``graded=False`` is for the student's own practice functions: their check never raises, not even under
+    ``DTSCAL_STRICT`` (nbval as an autograder grades the exercises only).
 
     A case that raises ``NotImplementedError`` stops the check (the function is still the
     stub). Any other exception fails that case with the exception's message, so student
@@ -110,7 +113,7 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
             report.diagnosis = mistake.line() if mistake else ""
     if show:
         print(report.text())
-    if strict() and not report.passed:
+    if graded and strict() and not report.passed:
         raise SelfCheckFailed(report.text())
     return report
 

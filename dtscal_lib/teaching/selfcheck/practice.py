@@ -60,7 +60,7 @@ def check_picture_difference(fn: Callable) -> Report:
     moved[0, 2] += 3.0
     moved[1, 2] += 4.0
     tilted = look_at_pose(yaw_deg=30, distance=0.4)
-    return run_check("picture_difference", fn, [
+    return run_check("picture_difference", fn, graded=False, cases=[
         Case("the same camera twice: 0 px", case(K, look_at_pose(distance=0.4), K, look_at_pose(distance=0.4)),
              hint="project the board's corners (board.object_points()) with both cameras and compare them"),
         Case("principal point moved by (3, 4) px: 5 px", case(K, tilted, moved, tilted),
@@ -90,7 +90,7 @@ def check_tilt_needed(fn: Callable) -> Report:
                 raise CheckFailed(f"tilt_needed({threshold}, {tilts!r}) returned {got!r}, expected {want!r}")
         return run
 
-    return run_check("tilt_needed", fn, [
+    return run_check("tilt_needed", fn, graded=False, cases=[
         Case("1 px over tilts 0 to 60 deg", case(1.0, range(0, 61)),
              hint="go through the tilts in order and return the FIRST whose difference is larger than the threshold"),
         Case("3 px over every 5th degree", case(3.0, range(0, 61, 5)),
@@ -125,7 +125,7 @@ def check_per_view_rms(fn: Callable) -> Report:
         got = np.asarray(f([np.array([[3.0, 4.0]])]), dtype=float)
         expect_close(got.ravel(), [5.0], 1e-12, "RMS of one corner off by (3, 4) px")
 
-    return run_check("per_view_rms", fn, [
+    return run_check("per_view_rms", fn, graded=False, cases=[
         Case("three views with different noise", run_values,
              hint="RMS of a view = sqrt(mean over its corners of du^2 + dv^2)"),
         Case("one view of one corner off by (3, 4): 5 px", run_one,
@@ -144,7 +144,7 @@ def check_worst_views(fn: Callable) -> Report:
                 raise CheckFailed(f"worst_views({rms.tolist()}, {n}) returned {got}, expected {want}")
         return run
 
-    return run_check("worst_views", fn, [
+    return run_check("worst_views", fn, graded=False, cases=[
         Case("the 3 worst of 5 views, worst first", case(3, [4, 1, 3]),
              hint="np.argsort sorts ascending: reverse it ([::-1]) for the worst first, then keep n"),
         Case("n = 1", case(1, [4]), hint="return a list (or array) of n indices, even for n = 1"),
@@ -172,7 +172,7 @@ def check_coverage(fn: Callable) -> Report:
                 raise CheckFailed(f"coverage at k = {k}: got {float(got):.4g}, expected {want:.4g}", hint=hint)
         return run
 
-    return run_check("coverage", fn, [
+    return run_check("coverage", fn, graded=False, cases=[
         Case("1 sigma: 3 of 6 errors", case(1.0, 0.5), hint="count the entries with |error| <= k * sigma, divide by "
              "how many there are"),
         Case("2 sigma: 5 of 6 errors", case(2.0, 5 / 6), hint="count the entries with |error| <= k * sigma"),
@@ -220,7 +220,7 @@ def check_next_board_move(fn: Callable) -> Report:
                 raise CheckFailed(f"for bars {shown} returned {got!r}, expected {want!r}", hint=hint)
         return run
 
-    return run_check("next_board_move", fn, [
+    return run_check("next_board_move", fn, graded=False, cases=[
         Case("only the right half seen: go left", case([(0.5, 0.9), (0.0, 1.0), (0.0, 0.4), (0.0, 0.5)], "left"),
              hint="X's lo and hi say where the board has been (0 = left edge, 1 = right edge): a large lo means "
                   "the left was never visited"),
