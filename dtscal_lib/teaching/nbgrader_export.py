@@ -111,10 +111,13 @@ def source_notebook(nb, assignment: str, *, functions: tuple[str, ...], checks: 
             continue
         if cell.cell_type == "code":
             new = nbformat.v4.new_code_cell(cell.source)
-            if EXERCISE_TAG in tags or PRACTICE_TAG in tags:  # practice: a solution cell without points
+            if EXERCISE_TAG in tags:
                 find_regions(cell.source, f"{assignment}, cell {i}")  # balanced, nbgrader's own markers
                 func = next((f for f in functions if f"def {f}(" in cell.source), f"exercise-{i}")
                 new.metadata = nbformat.from_dict(_md("solution", f"solution_{func}", tags=tags))
+            elif PRACTICE_TAG in tags:  # the student's own functions: a solution cell nbgrader clears, no points
+                names = [func for _b, _e, func in find_regions(cell.source, f"{assignment}, cell {i}")]
+                new.metadata = nbformat.from_dict(_md("solution", "practice_" + "_".join(names), tags=tags))
             else:
                 new.metadata = nbformat.from_dict(_md("locked", f"cell_{i:02d}", tags=tags))
         elif cell.cell_type == "markdown":
