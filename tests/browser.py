@@ -36,6 +36,18 @@ def chromium_path() -> str:
     return path
 
 
+def sync_playwright():
+    """Playwright's ``sync_playwright``; a skip locally, a failure under CI, when Playwright is missing."""
+    try:
+        from playwright.sync_api import sync_playwright as sp
+    except ImportError:
+        msg = "playwright is not installed (pip install -e .[test])"
+        if in_ci():
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return sp
+
+
 def launch_chromium(playwright):
     """Launch headless Chromium with the flags this closed network needs; returns the Browser."""
     return playwright.chromium.launch(executable_path=chromium_path(), headless=True, args=CHROMIUM_ARGS)

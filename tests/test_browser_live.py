@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import browser
-from browser import in_ci, launch_chromium, open_notebook
+from browser import launch_chromium, open_notebook
 from dtscal_lib import calib_files, datasets, ground
 
 pytestmark = pytest.mark.slow
@@ -54,14 +54,7 @@ def latency_summary(records: list, tool: str) -> tuple[np.ndarray, np.ndarray]:
     return (np.array([x[2] - x[1] for x in r], dtype=float), np.array([x[3] - x[1] for x in r], dtype=float))
 
 
-def _playwright():
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        if in_ci():
-            pytest.fail("playwright is not installed (pip install -e .[test])")
-        pytest.skip("playwright is not installed (pip install -e .[test])")
-    return sync_playwright
+_playwright = browser.sync_playwright  # Playwright, or a skip (a failure under CI)
 
 
 @pytest.fixture()

@@ -17,7 +17,7 @@ import nbformat
 import pytest
 
 import browser
-from browser import in_ci, launch_chromium, open_notebook
+from browser import launch_chromium, open_notebook
 from nbtools import NOTEBOOKS
 
 pytestmark = pytest.mark.slow
@@ -25,14 +25,6 @@ pytestmark = pytest.mark.slow
 NOTEBOOK = NOTEBOOKS / "01_pinhole_projection.ipynb"
 
 
-def _playwright():
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        if in_ci():
-            pytest.fail("playwright is not installed (pip install -e .[test])")
-        pytest.skip("playwright is not installed (pip install -e .[test])")
-    return sync_playwright
 
 
 def _dirty_after_open(page, url: str) -> bool:
@@ -51,7 +43,7 @@ def test_an_untouched_student_notebook_opens_unmodified(tmp_path):
     stripped = tmp_path / "name_only.ipynb"
     nb.metadata.language_info = {"name": "python"}  # what release.py wrote before issue 29
     stripped.write_text(json.dumps(nb, indent=1))
-    with browser.jupyterlab(tmp_path, [NOTEBOOK, stripped]) as (url, token, _root), _playwright()() as p:
+    with browser.jupyterlab(tmp_path, [NOTEBOOK, stripped]) as (url, token, _root), browser.sync_playwright()() as p:
         chromium = launch_chromium(p)
         try:
             page = chromium.new_page(viewport={"width": 1200, "height": 900})
