@@ -25,7 +25,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 COURSE = ("01_pinhole_projection", "02_homography", "03_intrinsic_calibration", "03b_calibration_quality",
-          "04_distortion_rectification", "05_extrinsic_calibration")
+          "04_distortion_rectification", "05_extrinsic_calibration", "06_duckiebot_camera")
 TARGET_S = 60.0
 
 

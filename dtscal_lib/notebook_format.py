@@ -17,6 +17,10 @@ from .errors import DtscalError
 BEGIN = "### BEGIN SOLUTION"
 END = "### END SOLUTION"
 EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG = "exercise", "imports", "solution_only"
+#: cells whose solution regions the student writes for practice (stubbed, self-checked, never graded)
+PRACTICE_TAG = "practice"
+#: the tags of cells that may hold solution regions
+REGION_TAGS = (EXERCISE_TAG, PRACTICE_TAG)
 
 _DEF_RE = re.compile(r"^\s*def\s+([A-Za-z_]\w*)\s*\(")
 
@@ -109,10 +113,13 @@ def _validate_cells(nb: NotebookNode, name: str) -> None:
                 f"{_where(name, i)}: an 'exercise' cell must hold exactly one solution region "
                 f"('{BEGIN}' ... '{END}'), found {len(regions)}"
             )
-        if regions and EXERCISE_TAG not in _tags(cell):
+        if PRACTICE_TAG in _tags(cell) and not regions:
+            raise DtscalError(f"{_where(name, i)}: a 'practice' cell must hold a solution region "
+                              f"('{BEGIN}' ... '{END}'), found none")
+        if regions and not any(t in _tags(cell) for t in REGION_TAGS):
             raise DtscalError(
-                f"{_where(name, i)}: a solution region outside an 'exercise' cell; tag the cell "
-                "'exercise' (cell.metadata.tags) so the tools can find it"
+                f"{_where(name, i)}: a solution region outside an 'exercise' or 'practice' cell; tag the cell "
+                "'exercise' (graded) or 'practice' (not graded) in cell.metadata.tags so the tools can find it"
             )
 
 

@@ -117,3 +117,4 @@ def open_notebook(page, url: str, *, timeout_ms: int = 120_000, dialog_ms: int =
     except Exception:  # no dialog: the kernel was chosen already
         pass
     page.wait_for_selector("#jp-main-statusbar :text('Idle')", timeout=timeout_ms)
+

@@ -141,3 +141,41 @@ def test_the_shared_configuration_prints_one_number_in_both_tables():
 def test_lens_explorer_has_a_fixed_text_form():
     box = experiments.lens_explorer(dt.default_K(), dt.default_dist())
     assert repr(box).startswith("lens explorer: sliders for k1 and k2")
+
+
+def test_lens_explorer_starts_from_the_students_guess():
+    box = experiments.lens_explorer(dt.default_K(), dt.default_dist(), k1=-0.12, k2=0.015)
+    k1, k2 = box.children[0], box.children[1]
+    assert (k1.value, k2.value) == (-0.12, 0.015)
+    assert "bend by" in box.children[3].value
+
+
+def test_line_bend_scores_what_the_picture_shows():
+    """Issue 29: the old number jumped from 12.9 px (k1 -0.20) to 614 px (-0.22) and 809 px (-0.26) on points the
+    picture never showed, and rated (-0.26, 0.035), whose lines look straight, worse than no correction."""
+    K, d = dt.default_K(), dt.default_dist()
+    bend = {(a, b): experiments.line_bend_px(K, d, a, b, step=4)
+            for a, b in [(0.0, 0.0), (-0.20, 0.0), (-0.22, 0.0), (-0.26, 0.0), (-0.26, 0.035), (-0.26, 0.045),
+                         (-0.24, 0.045), (-0.28, 0.045), (-0.26, 0.06)]}
+    assert bend[(-0.26, 0.035)] < bend[(0.0, 0.0)] / 2
+    k2_zero = [bend[(a, 0.0)] for a in (-0.20, -0.22, -0.26)]
+    assert max(k2_zero) < 3 * min(k2_zero) < 3 * bend[(0.0, 0.0)]  # no jump: the picture degrades gradually
+    truth = experiments.line_bend_px(K, d, d[0], d[1], step=4)
+    assert truth < 1e-6 and truth < min(bend.values())  # straight lines score best
+    near = bend[(-0.26, 0.045)]  # 0.003 from the truth: nearly straight
+    assert near < min(bend[(-0.24, 0.045)], bend[(-0.28, 0.045)], bend[(-0.26, 0.06)])
+
+
+def test_the_games_lens_is_straightened_by_its_own_coefficients_only():
+    K, lens = dt.default_K(), experiments.mystery_lens()
+    assert experiments.line_bend_px(K, lens, lens[0], lens[1], step=4) < 1e-6
+    assert experiments.line_bend_px(K, lens, *dt.default_dist()[:2], step=4) > 0.5  # not the recorded camera's
+
+
+def test_pitch_cost_follows_the_ray_geometry():
+    h, x = 0.104, 0.5
+    want = 1000 * (h / math.tan(math.atan(h / x) - math.radians(1.0)) - x)  # the same ray, 1 deg flatter
+    assert experiments.pitch_cost_mm(1.0, x, h) == pytest.approx(want)
+    assert experiments.pitch_cost_mm(0.0, x, h) == pytest.approx(0.0, abs=1e-9)
+    assert experiments.pitch_cost_mm(20.0, x, h) == math.inf  # the ray above the horizon never meets the ground
+    assert experiments.pitch_cost_mm(1.0, 0.8, h) > 2 * experiments.pitch_cost_mm(1.0, 0.5, h)

@@ -98,7 +98,7 @@ def course(tmp_path_factory):
             code.update(_functions(f))
         for c in nb["cells"]:
             meta = c["metadata"].get("nbgrader", {})
-            if meta.get("solution"):
+            if meta.get("solution") and meta["grade_id"].startswith("solution_"):  # practice cells: left as stubs
                 c["source"] = code[meta["grade_id"].removeprefix("solution_")]
         dest = course / "submitted" / student / a / f"{a}.ipynb"
         dest.parent.mkdir(parents=True)
@@ -171,15 +171,18 @@ def test_export_refuses_a_foreign_folder(tmp_path, capsys):
 
 
 def test_export_carries_the_ungraded_notebooks_without_test_cells(tmp_path):
-    """03b (split from 03 by issue 24) and 06 hold no exercise: exported read-only, with no autograded cell; 03 keeps
-    its three graded functions."""
+    """03b (split from 03 by issue 24) and 06 hold no exercise: exported read-only, with no autograded cell, except
+    the student's own practice functions (issue 29), solution cells without points; 03 keeps its three graded
+    functions."""
     assert dtscal(["release", "--nbgrader", str(tmp_path / "c")]) == 0
     src = tmp_path / "c" / "source"
     assert sorted(p.name for p in src.iterdir()) == sorted(p.stem for p in (ROOT / "solutions").glob("*.ipynb"))
     for name in ("03b_calibration_quality", "06_duckiebot_camera"):
         nb = json.loads((src / name / f"{name}.ipynb").read_text())
         meta = [c["metadata"].get("nbgrader", {}) for c in nb["cells"]]
-        assert meta and not any(m.get("grade") or m.get("solution") for m in meta), name
+        assert meta and not any(m.get("grade") or m.get("points") for m in meta), name
+        solution = [m["grade_id"] for m in meta if m.get("solution")]
+        assert solution and all(g.startswith("practice_") for g in solution), (name, solution)
     nb = json.loads((src / "03_intrinsic_calibration" / "03_intrinsic_calibration.ipynb").read_text())
     graded = sorted(c["metadata"]["nbgrader"]["grade_id"] for c in nb["cells"] if c["metadata"]["nbgrader"]["grade"])
     assert graded == ["test_extrinsics_from_homography", "test_intrinsic_constraints",

@@ -582,3 +582,21 @@ def test_update_across_the_split_of_notebook_03_keeps_the_students_code_and_adds
     assert any("moved to 03b_calibration_quality.ipynb" in line for line in report.kept)
     assert not any(s.startswith("noise_px = 0.2") for s in sources)  # the course's own copy is in 03b now
     assert (wsdir / "backups" / "split" / "03_intrinsic_calibration.ipynb").exists()
+
+
+def test_a_practice_function_the_student_wrote_survives_an_update(tmp_path):
+    """Issue 29: practice cells (the student's own functions, not graded) are the student's code like exercises."""
+    root = _kit(tmp_path)
+    wsdir = ws.ensure_workspace(root)
+    mine = ["    return 42.0  # my own analysis"]
+    _write_student_code(wsdir / "01_pinhole_projection.ipynb", "picture_difference", mine)
+    sol = root / "solutions" / "01_pinhole_projection.ipynb"
+    nb = nbformat.read(str(sol), as_version=4)
+    nb.cells.insert(1, nbformat.v4.new_markdown_cell("A correction from your instructor."))
+    nbformat.write(nb, str(sol))
+    rel.generate_notebooks(root / "solutions", root / "notebooks")
+    report = ws.update_workspace(root, stamp="t1")
+    assert report.ok, report.text()
+    assert "picture_difference" in report.carried["01_pinhole_projection.ipynb"]
+    cell = _cell_of(wsdir / "01_pinhole_projection.ipynb", "picture_difference")
+    assert mine[0] in cell and "def tilt_needed(" in cell and cell.count("NotImplementedError") == 1

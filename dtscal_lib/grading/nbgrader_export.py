@@ -30,8 +30,8 @@ from pathlib import Path
 import nbformat
 
 from ..errors import DtscalError
-from ..notebook_format import (BEGIN, END, EXERCISE_TAG, IMPORTS_TAG, SOLUTION_ONLY_TAG, _read, _solution_paths, _tags,
-                      _validate_cells, find_regions)
+from ..notebook_format import (BEGIN, END, EXERCISE_TAG, IMPORTS_TAG, PRACTICE_TAG, SOLUTION_ONLY_TAG, _read,
+                               _solution_paths, _tags, _validate_cells, find_regions)
 
 BEGIN_HIDDEN, END_HIDDEN = "### BEGIN HIDDEN TESTS", "### END HIDDEN TESTS"
 SCHEMA_VERSION = 3
@@ -115,6 +115,9 @@ def source_notebook(nb, assignment: str, *, functions: tuple[str, ...], checks: 
                 find_regions(cell.source, f"{assignment}, cell {i}")  # balanced, nbgrader's own markers
                 func = next((f for f in functions if f"def {f}(" in cell.source), f"exercise-{i}")
                 new.metadata = nbformat.from_dict(_md("solution", f"solution_{func}", tags=tags))
+            elif PRACTICE_TAG in tags:  # the student's own functions: a solution cell nbgrader clears, no points
+                names = [func for _b, _e, func in find_regions(cell.source, f"{assignment}, cell {i}")]
+                new.metadata = nbformat.from_dict(_md("solution", "practice_" + "_".join(names), tags=tags))
             else:
                 new.metadata = nbformat.from_dict(_md("locked", f"cell_{i:02d}", tags=tags))
         elif cell.cell_type == "markdown":

@@ -22,6 +22,9 @@ Cell conventions the tools rely on (``cell.metadata.tags``):
   it may use only ``np``, ``cv2``, ``math`` and other exercise functions of the
   notebook, so :func:`solution_functions` can run the imports cell plus the exercise
   cells without the rest of the notebook;
+* ``practice`` - a function (or a few) the student writes for their own analysis, with a self-check in
+  the notebook but never graded: solution regions become stubs as in ``exercise`` cells, and the
+  grader, :func:`solution_functions` and the nbgrader points leave them out;
 * ``solution_only`` - (optional) a cell dropped from the student version entirely.
 """
 
@@ -47,6 +50,8 @@ from ..notebook_format import (  # noqa: F401 - the notebook format, as release'
     END,
     EXERCISE_TAG,
     IMPORTS_TAG,
+    PRACTICE_TAG,
+    REGION_TAGS,
     SOLUTION_ONLY_TAG,
     _is_marker,
     _lines,
@@ -257,7 +262,7 @@ def student_notebook(solution_nb: NotebookNode, name: str | None = None) -> Note
     Regions become ``raise NotImplementedError`` stubs, cells tagged ``solution_only``
     are dropped, outputs are cleared, execution counts set to ``None``, cell metadata
     reduced to :data:`KEEP_CELL_METADATA` and notebook metadata to the kernel spec and
-    language name. The input is not modified; the result depends only on the input.
+    the kernel's language_info. The input is not modified; the result depends only on the input.
 
     Parameters
     ----------
@@ -293,9 +298,12 @@ def student_notebook(solution_nb: NotebookNode, name: str | None = None) -> Note
     meta = {}
     if "kernelspec" in solution_nb.metadata:
         meta["kernelspec"] = dict(solution_nb.metadata.kernelspec)
-    lang = solution_nb.metadata.get("language_info", {}).get("name")
-    if lang:
-        meta["language_info"] = {"name": lang}
+    lang = solution_nb.metadata.get("language_info", {})
+    if lang.get("name"):
+        # whole, as the kernel reports it: JupyterLab writes the kernel's language_info into a notebook it opens,
+        # so a name alone opens every untouched notebook as modified (issue 29; jupyter/notebook issue 2123: a
+        # Python of another version than the one that ran the solutions still does)
+        meta["language_info"] = copy.deepcopy(dict(lang))
     nb.metadata = nbformat.from_dict(meta)
     return nb
 

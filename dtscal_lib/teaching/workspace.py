@@ -103,7 +103,8 @@ def _regions(source: str, where: str) -> dict[str, tuple[int, int]]:
 
 
 def _is_exercise(cell) -> bool:
-    return cell.cell_type == "code" and "exercise" in cell.get("metadata", {}).get("tags", [])
+    tags = cell.get("metadata", {}).get("tags", [])
+    return cell.cell_type == "code" and ("exercise" in tags or "practice" in tags)  # practice: written, not graded
 
 
 def student_regions(nb) -> tuple[dict[str, list[str]], list[str]]:

@@ -22,15 +22,16 @@ import numpy as np
 from ... import camera as cam
 from ...boards import DUCKIETOWN_BOARD, Board
 from ...duckietown import IMAGE_SIZE
-from ...errors import DtscalError
 from ...homography import apply_homography
 from .figure import new_figure, png_bytes
 from .homography import unnormalized_dlt
 from .projection import look_at_pose
 
 __all__ = ["span_at_yaw", "invariance_experiment", "invariance_table", "dlt_column_range", "off_plane_experiment",
-           "degenerate_views", "zhang_constraints", "field_of_view", "corner_shift_px", "fixed_point_converged",
-           "line_bend_px", "lens_explorer", "camera_height_pitch", "pixel_footprint_mm", "yaw_cost_mm",
+           "lift_shift_px", "pitch_cost_mm", "degenerate_views", "zhang_constraints", "sigma_trials", "field_of_view",
+           "corner_shift_px", "fixed_point_converged",
+           "line_bend_px", "mystery_lens", "lens_explorer", "camera_height_pitch", "pixel_footprint_mm",
+           "yaw_cost_mm",
            "lane_markings_on_ground"]
 
 
@@ -116,6 +117,22 @@ def off_plane_experiment(heights_m: Sequence[float], K=None, board: Board = DUCK
     return out
 
 
+def lift_shift_px(h: float, K=None, board: Board = DUCKIETOWN_BOARD, yaw_deg: float = 30.0, pitch_deg: float = -20.0,
+                  distance: float = 0.4) -> tuple[float, float]:
+    """Smallest and largest pixel shift of the corners :func:`off_plane_experiment` lifts by ``h`` metres.
+
+    In that pose (0.4 m, turned 30 deg and 20 deg) the camera sees the lift obliquely, so a corner moves by less
+    than f h / Z; these are the numbers the prediction's explanation quotes.
+    """
+    K = cam.as_K(np.array([[307.7, 0, 329.7], [0, 315.0, 244.5], [0, 0, 1]]) if K is None else K)
+    R, t = look_at_pose(yaw_deg=yaw_deg, pitch_deg=pitch_deg, distance=distance, board=board)
+    X = board.object_points().copy()
+    lifted = X.copy()
+    lifted[::2, 2] = -h
+    moved = np.linalg.norm(cam.project_points(lifted, R, t, K) - cam.project_points(X, R, t, K), axis=1)[::2]
+    return float(moved.min()), float(moved.max())
+
+
 def dlt_column_range(offset: float, n_points: int = 35, seed: int = 2) -> tuple[float, float]:
     """Smallest and largest column scale (max |entry|) of the unnormalized DLT's matrix A for source points
     spread over a 640 x 480 image and shifted by ``offset`` (destination: pixels of a homography)."""
@@ -131,6 +148,29 @@ def dlt_column_range(offset: float, n_points: int = 35, seed: int = 2) -> tuple[
 
 
 # --------------------------------------------------------------------------------------------- notebook 03
+def sigma_trials(views, n_views: int = 8, trials: int = 12, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Calibrate ``trials`` random subsets of ``n_views`` views; the errors against the truth and the reported sigmas.
+
+    Each subset gets the kit's full calibration (``plumb_bob``); returned are the errors of fx, fy, cx, cy against
+    ``views.K_true`` and the standard deviations the calibration reports for them (``result.std``), both
+    (trials, 4). If the sigmas are honest, about 68 % of the errors lie within 1 sigma and 95 % within 2.
+    """
+    from ...calibration import calibrate
+
+    if not 3 <= n_views <= views.n_views:
+        raise ValueError(f"n_views must be 3 to {views.n_views} (the views there are), got {n_views}")
+    rng = np.random.default_rng(seed)
+    K = np.asarray(views.K_true, dtype=float)
+    errors, sigmas = [], []
+    for _ in range(int(trials)):
+        pick = rng.choice(views.n_views, int(n_views), replace=False)
+        r = calibrate([views.object_points[i] for i in pick], [views.image_points[i] for i in pick], views.size,
+                      model="plumb_bob")
+        errors.append([r.K[0, 0] - K[0, 0], r.K[1, 1] - K[1, 1], r.K[0, 2] - K[0, 2], r.K[1, 2] - K[1, 2]])
+        sigmas.append([r.std[k] for k in ("fx", "fy", "cx", "cy")])
+    return np.array(errors), np.array(sigmas)
+
+
 def _rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
     a, b = math.radians(yaw_deg), math.radians(pitch_deg)
     Ry = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
@@ -221,50 +261,65 @@ def fixed_point_converged(K, dist, rounds: int, size: tuple[int, int] = IMAGE_SI
     return int(np.sum(np.linalg.norm(back - corners, axis=1) < tol_px))
 
 
-def line_bend_px(K, dist, k1: float, k2: float, size: tuple[int, int] = IMAGE_SIZE) -> float:
-    """How far (pixels) straight lines still bend after undoing the lens with a guessed ``k1, k2``.
+def line_bend_px(K, dist, k1: float, k2: float, size: tuple[int, int] = IMAGE_SIZE, step: int = 2) -> float:
+    """How far (pixels) straight lines still bend in the picture the lens explorer shows for a guess ``k1, k2``.
 
-    Straight lines of the world (rows and columns of a 40 px grid of a pinhole camera with ``K``) are bent
-    by the true lens ``dist``, then undistorted with ``(k1, k2)`` (tangential terms as in ``dist``); the
-    result is the largest distance of a point from its line's straight fit. 0 when the guess is the truth.
+    The picture is the explorer's: the true lens ``dist`` records a grid of straight lines, and the recording is
+    rectified with the guess (``dist`` with ``k1, k2`` replaced), so picture pixel ``x`` shows what the lens
+    recorded at ``K distort_guess(K^-1 x)``, which is the pinhole image's point ``K undistort_true(...)`` of it.
+    Each straight line of the pinhole image (7 rows, 9 columns) is followed through the picture where it is drawn
+    (every column, or row, of pixels where the line crosses it; ``step`` px apart), a straight line is fitted to
+    those points; the result is the RMS distance of a line's points from its fit, averaged over the lines. So the
+    number measures what the picture shows: 0 for the true lens (the lines are straight), and a guess that folds the
+    picture near its edges (a line drawn twice) scores badly because the picture is bad there, never because of a
+    point outside it (issue 29: the old number jumped to 600-800 px on roots the picture never showed).
     """
     K = cam.as_K(K)
     d = np.asarray(cam.as_dist(dist), dtype=float).copy()
     guess = d.copy()
     guess[0], guess[1] = k1, k2
     w, h = size
-    worst = 0.0
-    s = np.linspace(0.03, 0.97, 25)
-    lines = [np.column_stack([s * w, np.full_like(s, v)]) for v in np.linspace(0.06, 0.94, 7) * h]
-    lines += [np.column_stack([np.full_like(s, u), s * h]) for u in np.linspace(0.06, 0.94, 9) * w]
-    for ideal in lines:
-        xy = cam.pixel_to_normalized(ideal, K)
-        bent = cam.distort_normalized(xy, d)
-        try:
-            back = cam.normalized_to_pixel(cam.undistort_normalized(bent, guess), K)
-        except DtscalError:  # a wild guess is not invertible near the edges: keep the points where it is
-            kept = []
-            for p in bent:
-                try:
-                    kept.append(cam.undistort_normalized(p[None], guess)[0])
-                except DtscalError:
-                    pass
-            if len(kept) < 3:
-                continue
-            back = cam.normalized_to_pixel(np.array(kept), K)
-        inside = (np.abs(back[:, 0] - w / 2) < w) & (np.abs(back[:, 1] - h / 2) < h)  # not a far-off root
-        back = back[inside]
-        if len(back) < 3:
+    u, v = np.meshgrid(np.arange(0, w, step, dtype=float), np.arange(0, h, step, dtype=float))
+    src = cam.normalized_to_pixel(cam.distort_normalized(cam.pixel_to_normalized(
+        np.column_stack([u.ravel(), v.ravel()]), K), guess), K)
+    seen = (src[:, 0] >= 0) & (src[:, 0] <= w - 1) & (src[:, 1] >= 0) & (src[:, 1] <= h - 1)
+    ideal = np.full_like(src, np.nan)
+    ideal[seen] = cam.normalized_to_pixel(cam.undistort_normalized(cam.pixel_to_normalized(src[seen], K), d), K)
+    iu, iv = ideal[:, 0].reshape(u.shape), ideal[:, 1].reshape(u.shape)
+    bends = []
+    for c, along, other, axis in ([(c, iv, iu, 0) for c in np.linspace(0.06, 0.94, 7) * h]
+                                  + [(c, iu, iv, 1) for c in np.linspace(0.06, 0.94, 9) * w]):
+        f = (along - c) if axis == 0 else (along - c).T  # rows of f run along the picture's v (axis 0) or u
+        o = other if axis == 0 else other.T
+        a, b = f[:-1], f[1:]
+        cross = (a * b <= 0) & np.isfinite(a) & np.isfinite(b) & (a != b)
+        cross &= np.isfinite(o[:-1]) & (np.abs(o[:-1] - (w if axis == 0 else h) / 2) <= 0.47 * (w if axis == 0 else h))
+        k, col = np.nonzero(cross)
+        if len(k) < 3:
             continue
-        c = back - back.mean(axis=0)
-        normal = np.linalg.svd(c)[2][-1]
-        worst = max(worst, float(np.abs(c @ normal).max()))
-    return worst
+        frac = a[k, col] / (a[k, col] - b[k, col])
+        pos = (k + frac) * step  # where the line crosses, along the scanned axis
+        pts = np.column_stack([col * step, pos]) if axis == 0 else np.column_stack([pos, col * step])
+        centred = pts - pts.mean(axis=0)
+        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+        bends.append(float(np.sqrt(np.mean((centred @ normal) ** 2))))
+    return float(np.mean(bends)) if bends else 0.0
 
 
-def lens_explorer(K, dist, size: tuple[int, int] = IMAGE_SIZE):
+def mystery_lens() -> np.ndarray:
+    """The lens of notebook 04's straighten-the-lines game: ``(k1, k2, p1, p2, k3)``, printed nowhere in the notebook.
+
+    A wide lens of the Duckiebot's kind (barrel, k1 < 0 and a small positive k2; Duckietown's per-robot files have k1
+    around -0.27), made up for the game and not the recorded camera's, whose coefficients the notebook prints at its
+    top: the student finds it by making the lines straight, not by reading it off.
+    """
+    return np.array([-0.21, 0.03, 0.0, 0.0, 0.0])
+
+
+def lens_explorer(K, dist, size: tuple[int, int] = IMAGE_SIZE, *, k1: float = 0.0, k2: float = 0.0):
     """Sliders for k1 and k2: a grid of straight lines seen through the true lens, undone with the sliders'
-    guess, redrawn live; the line under it gives the remaining bend (:func:`line_bend_px`).
+    guess, redrawn live; the line under it gives the remaining bend (:func:`line_bend_px`). The sliders start at
+    ``k1, k2`` (the notebook passes the student's own guess).
 
     Its text form (what a static page and nbval see) is one fixed sentence, so the stored output is the
     same on every machine.
@@ -279,12 +334,14 @@ def lens_explorer(K, dist, size: tuple[int, int] = IMAGE_SIZE):
 
     class LensBox(widgets.VBox):
         def __repr__(self) -> str:
-            return ("lens explorer: sliders for k1 and k2 undo the Duckiebot lens on a grid of straight lines "
+            return ("lens explorer: sliders for k1 and k2 undo a wide lens on a grid of straight lines "
                     "(needs a running Jupyter kernel)")
 
     fs = dict(continuous_update=False, style={"description_width": "40px"}, layout=widgets.Layout(width="360px"))
-    k1 = widgets.FloatSlider(value=0.0, min=-0.5, max=0.2, step=0.01, description="k1", readout_format=".2f", **fs)
-    k2 = widgets.FloatSlider(value=0.0, min=-0.1, max=0.2, step=0.005, description="k2", readout_format=".3f", **fs)
+    start_k1, start_k2 = float(k1), float(k2)
+    k1 = widgets.FloatSlider(value=start_k1, min=-0.5, max=0.2, step=0.01, description="k1", readout_format=".2f", **fs)
+    k2 = widgets.FloatSlider(value=start_k2, min=-0.1, max=0.2, step=0.005, description="k2", readout_format=".3f",
+                             **fs)
     image = widgets.Image(format="png", layout=widgets.Layout(width="420px", height="315px"))
     status = widgets.HTML()
 
@@ -299,7 +356,7 @@ def lens_explorer(K, dist, size: tuple[int, int] = IMAGE_SIZE):
         ax.set_title(f"undone with k1 = {k1.value:.2f}, k2 = {k2.value:.3f}", fontsize=9)
         ax.axis("off")
         image.value = png_bytes(fig)
-        status.value = f"<b>lines still bend by up to {line_bend_px(K, dist, k1.value, k2.value):.1f} px</b>"
+        status.value = f"<b>lines still bend by {line_bend_px(K, dist, k1.value, k2.value):.2f} px (RMS)</b>"
 
     k1.observe(redraw, names="value")
     k2.observe(redraw, names="value")
@@ -342,6 +399,20 @@ def yaw_cost_mm(yaw_deg: float, x_ahead: float) -> float:
     yaw about the robot's origin, so a point ``x`` ahead lands ``x sin(yaw)`` to the side.
     """
     return 1000.0 * x_ahead * math.sin(math.radians(yaw_deg))
+
+
+def pitch_cost_mm(pitch_error_deg: float, x_ahead: float, height: float) -> float:
+    """Error (mm, along x) of the ground point ``x_ahead`` metres ahead when the calibration's pitch is off.
+
+    A camera ``height`` metres up sees the point at ``atan(height / x)`` below the horizon; a calibration that
+    believes the camera looks ``pitch_error_deg`` less steeply than it does puts the same pixel's ray that much
+    flatter, at ``height / tan(atan(height / x) - error)``. The ray flattens towards the horizon far away, so
+    the error grows fast with distance (and a ray at or above the horizon never meets the ground: inf).
+    """
+    angle = math.atan2(height, x_ahead) - math.radians(pitch_error_deg)
+    if angle <= 0:
+        return math.inf
+    return 1000.0 * (height / math.tan(angle) - x_ahead)
 
 
 def lane_markings_on_ground(image, H_ground, *, v_min: int = 250, x_max: float = 0.6) -> dict:

@@ -49,4 +49,12 @@ from .distortion import (  # noqa: E402
     opencv_distort,
 )
 from .ground import check_board_ground_points, check_camera_height_pitch, check_pixel_to_ground  # noqa: E402
-from .predict import Prediction, predict_choice, predict_number, predict_points  # noqa: E402
+from .practice import (  # noqa: E402
+    check_coverage,
+    check_next_board_move,
+    check_per_view_rms,
+    check_picture_difference,
+    check_tilt_needed,
+    check_worst_views,
+)
+from .predict import Prediction, check_prediction, predict_choice, predict_number, predict_points  # noqa: E402

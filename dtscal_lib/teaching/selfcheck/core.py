@@ -19,7 +19,15 @@ PASS, FAIL, NOT_IMPLEMENTED = "pass", "fail", "not implemented yet"
 
 
 class CheckFailed(AssertionError):
-    """Raised by a case to fail it with a message for the student."""
+    """Raised by a case to fail it with a message for the student.
+
+    ``hint`` names what to do about THIS failure (a wrong shape, a flipped sign) and replaces the case's
+    general hint, which is about the case's values: a student sees only the hint about the mistake made.
+    """
+
+    def __init__(self, message: str = "", *, hint: str | None = None):
+        super().__init__(message)
+        self.hint = hint
 
 
 @dataclass
@@ -75,8 +83,11 @@ class Report:
         return self.text()
 
 
-def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) -> Report:
+def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True, graded: bool = True) -> Report:
     """Run ``cases`` against the student's ``fn``; print and return the :class:`Report`.
+
+    ``graded=False`` is for the student's own practice functions: their check never raises, not even under
+    ``DTSCAL_STRICT`` (nbval as an autograder grades the exercises only).
 
     A case that raises ``NotImplementedError`` stops the check (the function is still the
     stub). Any other exception fails that case with the exception's message, so student
@@ -94,7 +105,7 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
             report.results = [CaseResult(case.title, NOT_IMPLEMENTED)]
             break
         except CheckFailed as exc:
-            report.results.append(CaseResult(case.title, FAIL, str(exc), case.hint))
+            report.results.append(CaseResult(case.title, FAIL, str(exc), case.hint if exc.hint is None else exc.hint))
         except Exception as exc:  # student code may raise anything
             tb = traceback.extract_tb(exc.__traceback__)
             where = f" (line {tb[-1].lineno} in {tb[-1].name})" if tb else ""
@@ -109,7 +120,7 @@ def run_check(name: str, fn: Callable, cases: list[Case], *, show: bool = True) 
             report.diagnosis = mistake.line() if mistake else ""
     if show:
         print(report.text())
-    if strict() and not report.passed:
+    if graded and strict() and not report.passed:
         raise SelfCheckFailed(report.text())
     return report
 

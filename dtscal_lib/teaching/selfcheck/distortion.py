@@ -133,22 +133,30 @@ def _case_maps(K, dist, new_K, size, title, hint) -> Case:
         try:
             map_x, map_y = out
         except Exception:
-            raise CheckFailed(f"should return a pair (map_x, map_y), got {type(out).__name__}") from None
+            raise CheckFailed(f"should return a pair (map_x, map_y), got {type(out).__name__}",
+                              hint=PAIR_HINT) from None
         for name, m in (("map_x", map_x), ("map_y", map_y)):
             if not isinstance(m, np.ndarray):
-                raise CheckFailed(f"{name} should be a numpy array, got {type(m).__name__}")
+                raise CheckFailed(f"{name} should be a numpy array, got {type(m).__name__}", hint=PAIR_HINT)
             if m.shape != (h, w):
                 raise CheckFailed(
                     f"{name} should have shape (height, width) = ({h}, {w}) for size = (width, height) = "
-                    f"({w}, {h}), got {m.shape}"
+                    f"({w}, {h}), got {m.shape}", hint=SHAPE_HINT
                 )
             if m.dtype != np.float32:
-                raise CheckFailed(f"{name} should be float32 (what cv2.remap wants), got {m.dtype}")
+                raise CheckFailed(f"{name} should be float32 (what cv2.remap wants), got {m.dtype}",
+                                  hint="convert at the end: map_x.astype(np.float32)")
         ref_x, ref_y = cv2.initUndistortRectifyMap(K, dist, None, new_K, (w, h), cv2.CV_32FC1)
         expect_close(map_x, ref_x, 0.01, "map_x (vs cv2.initUndistortRectifyMap)")
         expect_close(map_y, ref_y, 0.01, "map_y (vs cv2.initUndistortRectifyMap)")
 
     return Case(title, run, hint=hint)
+
+
+#: the hint for maps of the wrong shape: size is (width, height), arrays are (rows, columns)
+SHAPE_HINT = ("size is (width, height) but arrays are (height, width): w, h = size; build the grid with "
+              "np.meshgrid(np.arange(w), np.arange(h)) (it returns (h, w) arrays) and reshape results to (h, w)")
+PAIR_HINT = "return two numpy arrays: return map_x, map_y"
 
 
 def check_rectification_maps(fn: Callable) -> Report:

@@ -109,23 +109,38 @@ def _case_robot(height, pitch, yaw, x, scale, title, hint) -> Case:
     def run(fn):
         K = dt.default_P()[:, :3]
         H = robot_ground_homography(K, height, pitch, yaw_deg=yaw, x=x) * scale
-        got = expect_shape(fn(H.copy(), K.copy()), (2,), "camera_height_pitch(H, K)")
+        try:
+            got = expect_shape(fn(H.copy(), K.copy()), (2,), "camera_height_pitch(H, K)")
+        except CheckFailed as exc:
+            raise CheckFailed(str(exc), hint=SHAPE_HINT) from None
+        if abs(got[0] + height) < 1e-6 and abs(got[1] - pitch) < 1e-5:
+            raise CheckFailed(f"height {got[0]:.4f} m: the camera is {height} m ABOVE the ground; the pitch is right",
+                              hint=SIGN_HINT)
         expect_close(got[:1], [height], 1e-6, "height (metres above the ground)")
         expect_close(got[1:], [pitch], 1e-5, "pitch (degrees below the horizon)")
 
     return Case(title, run, hint=hint)
 
 
+#: the hint for a result of the wrong shape or type
+SHAPE_HINT = "return np.array([height_in_metres, pitch_in_degrees]) (float64, shape (2,))"
+#: the hint for the other sign of lambda: it negates r1, r2 and t, so C_z = -(r3 . t) comes out negative
+SIGN_HINT = ("lambda's sign picks one of two mirror solutions; the wrong one puts the camera under the ground. "
+             "Choose the sign so that a ground point AHEAD of the robot, e.g. (0.3, 0), has a positive depth "
+             "(third coordinate of lambda (0.3 r1 + t)); notebook 03's rule t_z > 0 does not carry over: t is the "
+             "robot's origin under the wheels, which can be behind the camera")
+
+
 def check_camera_height_pitch(fn: Callable) -> Report:
     """Check ``camera_height_pitch(H, K) -> array([height_m, pitch_deg])`` on cameras placed by hand."""
     return run_check("camera_height_pitch", fn, [
-        _case_robot(0.104, 18.0, 0.8, 0.062, 1.0, "a Duckiebot camera 10.4 cm up, pitched 18 deg down", hint=(
+        _case_robot(0.125, 24.0, 0.8, 0.062, 1.0, "a camera placed by hand on a Duckiebot-sized robot", hint=(
             "M = K^-1 H^-1 = lambda [r1 r2 t]; lambda = 1 / |M[:, 0]|; R = [r1 r2 r1 x r2]; C = -R^T t; "
             "height = C[2], pitch = degrees(asin(-R[2, 2]))")),
         _case_robot(0.2, 40.0, -3.0, 0.0, -7.5, "a higher, steeper camera; H times -7.5 (any scale and sign)", hint=(
             "H is defined up to scale and sign: fix lambda's sign so that a ground point ahead of the robot, "
             "e.g. (0.3, 0), is in front of the camera (positive depth)")),
-        _case_robot(0.06, -4.0, 0.0, 0.1, 1.0, "a low camera looking almost straight ahead", hint=(
-            "return np.array([height_in_metres, pitch_in_degrees]) (float64, shape (2,)); this camera looks 4 deg UP: "
-            "the pitch below the horizon is negative (no abs())")),
+        _case_robot(0.06, -4.0, 0.0, 0.1, 1.0, "a low camera looking slightly up", hint=(
+            "this camera looks 4 deg UP: the pitch below the horizon is negative (no abs()); nearly level, asin's "
+            "argument is small: clip it to [-1, 1] and keep degrees")),
     ])

@@ -10,7 +10,10 @@ and the grader never sees them (it grades only functions defined in cells tagged
 
 * :func:`predict_number` - a number, right when within a tolerance (absolute or relative);
 * :func:`predict_choice` - one of a few named answers;
-* :func:`predict_points` - a sketch as a few points, right when close to the measured points.
+* :func:`predict_points` - a sketch as a few points, right when close to the measured points;
+* :func:`check_prediction` - the course's questions: the notebook passes the question's key, the
+  prediction and what was measured; the question, its tolerance and its explanation live in
+  :mod:`.answers`, never in the notebook, so nothing above the check gives the answer away.
 
 Each returns a :class:`Prediction` whose text (what the notebook shows) states the question, the
 prediction, what was measured and why. A missing prediction (``None``) still shows the answer and the
@@ -33,9 +36,14 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Prediction", "predict_number", "predict_choice", "predict_points", "RIGHT", "WRONG", "MISSING"]
+from .answers import question
+
+__all__ = ["Prediction", "predict_number", "predict_choice", "predict_points", "check_prediction", "RIGHT", "WRONG",
+           "MISSING", "UNREAD"]
 
 RIGHT, WRONG, MISSING = "right", "not quite", "no prediction"
+#: a prediction the check could not read (text for a number, a typo in a choice): no answer shown
+UNREAD = "not read"
 
 
 @dataclass(frozen=True)
@@ -56,7 +64,8 @@ class Prediction:
         if self.verdict == MISSING:
             lines.append("    (next time write your prediction in the cell above first: committing to a guess "
                          "is what makes the answer stick)")
-        lines.append(f"    why: {self.why}")
+        if self.verdict != UNREAD:  # the answer stays hidden until the prediction can be read
+            lines.append(f"    why: {self.why}")
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -159,3 +168,39 @@ def predict_points(question: str, prediction, measured, *, tol: float, unit: str
     verdict = RIGHT if ok else WRONG
     return Prediction(question, verdict, f"your sketch is {_fmt(rms, digits)}{u} RMS from the measured points "
                                          f"{shown}{u}: {verdict} (tolerance {_fmt(tol, digits)}{u})", why)
+
+
+def check_prediction(key: str, prediction, measured, **facts) -> Prediction:
+    """Judge the course's prediction ``key`` (see :mod:`.answers`) against what the experiment measured.
+
+    ``measured`` is a number, or for a choice question the right choice; ``facts`` are the experiment's
+    other numbers the explanation quotes. A prediction the check cannot read (text where a number is
+    asked, an answer not among the choices) is never an error: the result names the variable to fix
+    and what to write, and keeps the answer hidden.
+
+    >>> print(check_prediction("01.width_ratio", "1.6x", 1.61))  # doctest: +ELLIPSIS
+    [predict] how many times wider does the board look at 0.28 m than at 0.45 m?
+        could not read your prediction: predict_width_ratio = '1.6x' is not a number; write a number ...
+    """
+    q = question(key)
+    if q.is_choice:
+        key_p = None if prediction is None else str(prediction).strip().lower()
+        if key_p is not None and key_p not in {c.lower() for c in q.choices}:
+            return Prediction(q.text, UNREAD, f"could not read your prediction: {q.var} = {prediction!r} is not one "
+                                              "of " + ", ".join(repr(c) for c in q.choices)
+                              + f"; write e.g. {q.var} = {q.choices[0]!r} (with the quotes) and run this cell again",
+                              "")
+        res = predict_choice(q.text, prediction, measured, q.choices, why="")
+        return Prediction(q.text, res.verdict, res.detail, q.why(measured, prediction, facts))
+    if prediction is not None:
+        try:
+            p = float(prediction)
+            ok = math.isfinite(p)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            return Prediction(q.text, UNREAD, f"could not read your prediction: {q.var} = {prediction!r} is not a "
+                                              f"number; write a number without quotes or unit, e.g. {q.var} = 2.5, "
+                                              "and run this cell again", "")
+    res = predict_number(q.text, prediction, measured, unit=q.unit, atol=q.atol, rtol=q.rtol, digits=q.digits, why="")
+    return Prediction(q.text, res.verdict, res.detail, q.why(float(measured), prediction, facts))
