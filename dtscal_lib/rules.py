@@ -740,12 +740,10 @@ def rule_line_offsets(c: Case) -> None:
 
 def rule_radial(c: Case) -> None:
     """A radial residual the distortion model cannot absorb (not looked for when a bent line explains it)."""
-    if c.lines:
+    if c.lines or _radial_finding(c.result, c.res, c.noise) is None:
         return
-    lens_words = _richer_model(c.result, c.noise, c.richer)
-    radial = _radial_finding(c.result, c.res, c.noise, lens_words)
-    if radial is not None:
-        c.findings.append(radial)
+    # only then the lens advice, which may fit the finer models (the costly part): what they showed is the cause
+    c.findings.append(_radial_finding(c.result, c.res, c.noise, _richer_model(c.result, c.noise, c.richer)))
 
 
 def rule_outlier_corners(c: Case) -> None:
