@@ -31,6 +31,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
 
 from dtscal_lib import pipeline  # noqa: E402
 from dtscal_lib.boards import parse_board  # noqa: E402
@@ -66,18 +67,10 @@ def shift_lower_half(obj, img, view, px, by_grid=True):
 
 
 def bend_column(obj, img, views, px, column=0):
-    out = []
-    for v, (o, p) in enumerate(zip(obj, img)):
-        p = p.copy()
-        if v in views:
-            g = grid_indices(o)
-            inner = column + 1
-            for i in np.flatnonzero(g[:, 0] == column):
-                j = np.flatnonzero((g[:, 0] == inner) & (g[:, 1] == g[i, 1]))[0]
-                d = p[i] - p[j]
-                p[i] += px * d / np.linalg.norm(d)
-        out.append(p)
-    return out
+    """Column ``column`` moved ``px`` outwards in ``views`` (benchmarks/bench_verdict.py's planted bent column)."""
+    from bench_verdict import _shift_column
+
+    return _shift_column(obj, img, column, views, px)
 
 
 def move_corner(obj, img, view, px, column=2, row=2):

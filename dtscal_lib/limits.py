@@ -126,14 +126,14 @@ TABLE: tuple[Limit, ...] = (
     Limit("robot_view_sigma_doubtful", 1.0, "px, mean 1-sigma where the robot looks", "verdict 'doubtful' (rules)",
           "where the robot looks (a Duckiebot: the lower half of the image; the DD24: its whole view) a pixel of "
           "doubt moves a ground point 60 cm ahead of a Duckiebot by about 0.9 cm",
-          "OpenCV's real photographs, full sets and 20 random subsets of 6-10 views each "
-          "(benchmarks/bench_verdict_subsets.py): left 0.13 px (full), subsets median 0.15, max 0.31; right 0.08 "
-          "(full), max 0.14; 3x the largest clean subset"),
+          "OpenCV's real photographs, full sets and 60 random subsets of 6-10 views each "
+          "(benchmarks/bench_verdict_subsets.py): left 0.13 px (full), subsets median 0.16, max 0.51; right 0.08 "
+          "(full), max 0.20; about 2x the largest clean subset"),
     Limit("robot_view_sigma_bad", 3.0, "px, mean 1-sigma where the robot looks", "verdict 'bad' (rules)",
           "a calibration that leaves the ground ahead uncertain by several pixels misleads the robot: 3 px is "
           "about 2.7 cm on the ground 60 cm ahead of a Duckiebot (the nominal mounting, dtscal_lib.uncertainty)",
-          "10x the largest clean subset of OpenCV's real photographs (0.31 px, left, 6-10 views); the image "
-          "corners of the same subsets reach 4.59 px, which is advice, not bad"),
+          "6x the largest clean subset of OpenCV's real photographs (0.51 px, left, 6-10 views); the image "
+          "corners of the same subsets reach 10.7 px (median 1.96), which is advice, not bad"),
     Limit("robot_shift_bad", 1.0, "px, mean projection shift where the robot looks", "verdict 'bad' (rules)",
           "a defect whose removal moves the projection where the robot looks by more than this is one the robot "
           "acts on: about 1 cm on the ground 60 cm ahead of a Duckiebot",

@@ -86,15 +86,21 @@ def residuals(result) -> list[np.ndarray]:
     return residuals_of(result, result.object_points, result.image_points)
 
 
-def residuals_of(fit, obj_list, img_list) -> list[np.ndarray]:
-    """Per view (N_i, 2) ``projected - observed`` pixels of board points ``obj_list`` seen at ``img_list``
-    through a fit's camera and poses (all views in one projection; skew honoured)."""
+def _camera_points(fit, obj_list):
+    """``(counts, Rv, P)``: the points per view, each point's view rotation (M, 3, 3) and the board points in the
+    camera frame (M, 3) through a fit's poses, all views stacked."""
     counts = [len(o) for o in obj_list]
     view = np.repeat(np.arange(len(obj_list)), counts)
     xy = np.concatenate([np.asarray(o, dtype=np.float64)[:, :2] for o in obj_list])
     R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
     Rv = R[view]
-    P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
+    return counts, Rv, Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
+
+
+def residuals_of(fit, obj_list, img_list) -> list[np.ndarray]:
+    """Per view (N_i, 2) ``projected - observed`` pixels of board points ``obj_list`` seen at ``img_list``
+    through a fit's camera and poses (all views in one projection; skew honoured)."""
+    counts, _, P = _camera_points(fit, obj_list)
     q = project_points(P, np.zeros(3), np.zeros(3), fit.K, fit.dist, model=getattr(fit, "model", "plumb_bob"))
     obs = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in img_list])
     return np.split(q - obs, np.cumsum(counts)[:-1])
@@ -169,12 +175,7 @@ def corner_noise(object_points, image_points) -> tuple[float, int]:
 
 def _board_axis_jacobians(fit, obj_list, dist_idx) -> list[np.ndarray]:
     """Per view (N_i, 2, 2) ``d pixel / d (board x, board y)`` at each board point, through the fitted camera."""
-    counts = [len(o) for o in obj_list]
-    view = np.repeat(np.arange(len(obj_list)), counts)
-    xy = np.concatenate([np.asarray(o, dtype=np.float64)[:, :2] for o in obj_list])
-    R, _ = rodrigues(np.asarray(fit.rvecs, dtype=np.float64), jacobian=False)
-    Rv = R[view]
-    P = Rv[:, :, 0] * xy[:, :1] + Rv[:, :, 1] * xy[:, 1:] + np.asarray(fit.tvecs, dtype=np.float64)[view]
+    counts, Rv, P = _camera_points(fit, obj_list)
     _, dqdP, _ = _projection_jacobian(P, fit.K, fit.dist, fit.skew, dist_idx)
     return np.split(np.matmul(dqdP, Rv[:, :, :2]), np.cumsum(counts)[:-1])
 
@@ -739,12 +740,10 @@ def rule_line_offsets(c: Case) -> None:
 
 def rule_radial(c: Case) -> None:
     """A radial residual the distortion model cannot absorb (not looked for when a bent line explains it)."""
-    if c.lines:
+    if c.lines or _radial_finding(c.result, c.res, c.noise) is None:
         return
-    lens_words = _richer_model(c.result, c.noise, c.richer)
-    radial = _radial_finding(c.result, c.res, c.noise, lens_words)
-    if radial is not None:
-        c.findings.append(radial)
+    # only then the lens advice, which may fit the finer models (the costly part): what they showed is the cause
+    c.findings.append(_radial_finding(c.result, c.res, c.noise, _richer_model(c.result, c.noise, c.richer)))
 
 
 def rule_outlier_corners(c: Case) -> None:
