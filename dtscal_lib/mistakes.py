@@ -733,8 +733,8 @@ def precision_problem(func: str, args_list: list[tuple], outputs: list) -> str:
         got, wants = _as_arrays(out), _as_arrays(want)
         err = relative_error(got, wants) if got is not None and len(got) == len(wants) else None
         if err is not None and float32_sized(err):
-            return (f"right to a relative {err:.1g} only, where float64 gives {PRECISION_RTOL:g} or better: "
-                    "float32 arithmetic (or a rounded constant, or a loose iteration tolerance) somewhere; "
-                    "compute in float64 throughout")
+            return (f"should be computed in float64: right to a relative {err:.1g} only, where float64 gives "
+                    f"{PRECISION_RTOL:g} or better (float32 arithmetic, a rounded constant or a loose iteration "
+                    "tolerance somewhere)")
     return ""
 

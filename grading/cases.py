@@ -5,7 +5,9 @@
 
 Each check: `name` (shown to the student), `weight` (points), `seed` (inputs are drawn
 from it), `judge` (close | unchanged | dtype | raises | scaled | truth_H | truth_K | truth_pose |
-precision) and the input parameters of its function (see dtscal_lib/grading/checks.py). Each
+precision) and the input parameters of its function (see dtscal_lib/grading/checks.py). The
+weights of a function sum to 10 or 12.5 (scaled to 10 points: the per-check points then have two
+decimals at most, as Gradescope shows them). Each
 kind is a dataclass (dtscal_lib/grading/specs.py): a key it does not know is an error naming it.
 `h33` scales the input homographies so that H[2, 2] = h33 (code dividing H in place shows);
 "random scale and sign" checks alternate the sign, first case negative (never left to the seed);
@@ -25,7 +27,7 @@ CHECKS = {
              camera="duckie", atol=1e-6, rtol=0.0),
         dict(name="a single point (N = 1)", weight=1, seed=640187, views=2, n=1, atol=1e-6, rtol=0.0),
         dict(name="returns float64 (N, 2)", weight=1, seed=640189, views=1, n=13, judge="dtype"),
-        dict(name="inputs not modified", weight=2, seed=640193, views=1, n=9, judge="unchanged"),
+        dict(name="inputs not modified", weight=1, seed=640193, views=1, n=9, judge="unchanged"),
         dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
     "apply_homography": [
@@ -35,7 +37,7 @@ CHECKS = {
              atol=0.0, rtol=1e-9),
         dict(name="a single point (N = 1)", weight=1, seed=640229, views=2, n=1, atol=1e-9, rtol=1e-9),
         dict(name="returns float64 (N, 2)", weight=1, seed=640231, views=1, n=6, judge="dtype"),
-        dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640237, views=1, n=8, h33=-2.5,
+        dict(name="inputs not modified (H[2, 2] != 1)", weight=1, seed=640237, views=1, n=8, h33=-2.5,
              judge="unchanged"),
         dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
     ],
@@ -53,11 +55,11 @@ CHECKS = {
              sigma=1.0, offset=2.0e4, span=3.0, judge="truth_H"),
         dict(name="H[2, 2] = 1", weight=1, seed=640261, views=1, n=12, judge="scaled"),
         dict(name="inputs not modified", weight=1, seed=640267, views=1, n=10, judge="unchanged"),
-        dict(name="returns float64 (3, 3)", weight=1, seed=640268, views=1, n=9, judge="dtype"),
-        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
+        dict(name="returns float64 (3, 3)", weight=1.25, seed=640268, views=1, n=9, judge="dtype"),
+        dict(name="computed in float64 (the precision contract)", weight=1.25, judge="precision"),
     ],
     "intrinsic_constraints": [
-        dict(name="random homographies", weight=5, seed=640271, views=3, random_H=True, atol=0.0, rtol=1e-10),
+        dict(name="random homographies", weight=4, seed=640271, views=3, random_H=True, atol=0.0, rtol=1e-10),
         dict(name="board homographies of a skewed camera", weight=3, seed=640277, views=3, atol=0.0,
              rtol=1e-10),
         dict(name="returns float64 (2, 6)", weight=1, seed=640279, views=1, judge="dtype"),
@@ -76,9 +78,9 @@ CHECKS = {
         dict(name="fewer than 3 views must raise ValueError", weight=1, seed=640301, views=2, judge="raises"),
         dict(name="a single view must raise ValueError", weight=1, seed=640302, views=1, judge="raises"),
         dict(name="returns float64 (3, 3)", weight=1, seed=640303, views=4, judge="dtype"),
-        dict(name="the list of homographies not modified (H[2, 2] != 1)", weight=1, seed=640304, views=4,
+        dict(name="the list of homographies not modified (H[2, 2] != 1)", weight=1.25, seed=640304, views=4,
              h33=-4.0, judge="unchanged"),
-        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
+        dict(name="computed in float64 (the precision contract)", weight=1.25, judge="precision"),
     ],
     "extrinsics_from_homography": [
         dict(name="exact poses from homographies at random scale and sign", weight=4, seed=640307, views=4,
@@ -88,11 +90,11 @@ CHECKS = {
              seed=640319, views=4, sigma=0.5, camera="duckie", judge="truth_pose"),
         dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640321, views=1, h33=-2.0,
              judge="unchanged"),
-        dict(name="returns float64 (R (3, 3), t (3,))", weight=1, seed=640322, views=1, judge="dtype"),
-        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
+        dict(name="returns float64 (R (3, 3), t (3,))", weight=1.25, seed=640322, views=1, judge="dtype"),
+        dict(name="computed in float64 (the precision contract)", weight=1.25, judge="precision"),
     ],
     "distort_normalized": [
-        dict(name="tangential lens", weight=3, seed=640327, n=40, lens="tangential", atol=1e-10, rtol=0.0),
+        dict(name="tangential lens", weight=2, seed=640327, n=40, lens="tangential", atol=1e-10, rtol=0.0),
         dict(name="radial lens with k3", weight=3, seed=640333, n=40, lens="radial_k3", atol=1e-10, rtol=0.0),
         dict(name="the Duckiebot lens over the whole image", weight=2, seed=640339, lens="duckiebot",
              region="image", atol=1e-10, rtol=0.0),
@@ -108,9 +110,9 @@ CHECKS = {
         dict(name="no distortion", weight=1, seed=640363, n=10, lens="none", atol=1e-12, rtol=0.0),
         dict(name="inputs not modified", weight=2, seed=640369, n=10, lens="tangential", radius=0.5,
              judge="unchanged"),
-        dict(name="returns float64 (N, 2)", weight=1, seed=640370, n=6, lens="tangential", radius=0.5,
+        dict(name="returns float64 (N, 2)", weight=1.25, seed=640370, n=6, lens="tangential", radius=0.5,
              judge="dtype"),
-        dict(name="computed in float64 (the precision contract)", weight=1, judge="precision"),
+        dict(name="computed in float64 (the precision contract)", weight=1.25, judge="precision"),
     ],
     "rectification_maps": [
         dict(name="the Duckiebot, ROS's new camera matrix (alpha = 0)", weight=3, seed=640373, alpha=0.0,
@@ -125,7 +127,7 @@ CHECKS = {
     "board_ground_points": [
         dict(name="the Duckietown board in its calibration place", weight=4, seed=640389,
              boards=[(7, 5, 0.031, 0.191, -0.093)], atol=1e-12, rtol=0.0),
-        dict(name="other boards (cols and rows differ)", weight=4, seed=640393,
+        dict(name="other boards (cols and rows differ)", weight=3, seed=640393,
              boards=[(4, 3, 0.05, 0.3, -0.2), (3, 6, 0.02, 0.1, 0.05), (9, 2, 0.025, 0.15, -0.11)],
              atol=1e-12, rtol=0.0),
         dict(name="returns float64 (N, 2)", weight=2, seed=640399, boards=[(5, 4, 0.03, 0.2, -0.06)],
@@ -134,7 +136,7 @@ CHECKS = {
     ],
     "pixel_to_ground": [
         dict(name="ground homographies", weight=4, seed=640403, views=3, n=25, atol=1e-9, rtol=1e-9),
-        dict(name="the same homographies at random scale and sign", weight=3, seed=640409, views=3, n=25,
+        dict(name="the same homographies at random scale and sign", weight=2, seed=640409, views=3, n=25,
              random_scale=True, atol=1e-9, rtol=1e-9),
         dict(name="returns float64 (N, 2)", weight=1, seed=640411, views=1, n=5, judge="dtype"),
         dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640417, views=1, n=5, h33=-1.7,
@@ -150,7 +152,7 @@ CHECKS = {
         dict(name="the same at random scale and sign of H", weight=3, seed=640423, views=4, random_scale=True,
              atol=1e-6, rtol=0.0),
         # a camera pitched up (a negative pitch below the horizon) shows abs() on the pitch
-        dict(name="cameras pitched 2-15 deg UP (negative pitch)", weight=2, seed=640425, views=3,
+        dict(name="cameras pitched 2-15 deg UP (negative pitch)", weight=1.5, seed=640425, views=3,
              pitch=(-15.0, -2.0), atol=1e-6, rtol=0.0),
         dict(name="returns float64 (2,)", weight=1, seed=640427, views=1, judge="dtype"),
         dict(name="inputs not modified (H[2, 2] != 1)", weight=2, seed=640429, views=1, h33=-3.0,

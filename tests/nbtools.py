@@ -95,3 +95,13 @@ def exercise_functions(nb) -> list[str]:
         if c.cell_type == "code" and "exercise" in c.get("metadata", {}).get("tags", []):
             names += [n.name for n in ast.parse(c.source).body if isinstance(n, ast.FunctionDef)]
     return names
+
+
+def checks_of(assignment: str) -> int:
+    """How many hidden checks grade ``assignment`` (grading/cases.py: one Gradescope test each)."""
+    import runpy
+
+    from dtscal_lib.exercise_rules import NOTEBOOKS
+
+    cases = runpy.run_path(str(ROOT / "grading" / "cases.py"))["CHECKS"]
+    return sum(len(cases[f]) for f in NOTEBOOKS[assignment].functions)

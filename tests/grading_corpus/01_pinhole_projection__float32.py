@@ -1,6 +1,6 @@
 # Corpus of plausible student mistakes for tests/test_grading.py (also test_selfcheck_diagnosis.py).
 # mistake: float32
-# expect: should return dtype float64
+# expect: of dtype float64, got dtype float32
 
 import numpy as np
 
