@@ -155,12 +155,24 @@ def _commit(args, run, kind: str):
     if not args.commit or run.doubts:  # a result the kit refused is never sent to the robot
         return None, None
     try:
+        link = _dtps_link(args, run)
         if kind == "intrinsics":
-            return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout), None
+            return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout, dtps=link), None
         return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout, url=args.upload_url,
-                                  fmt=args.format), None
+                                  fmt=args.format, dtps=link), None
     except CommitError as exc:
         return None, exc
+
+
+def _dtps_link(args, run):
+    """Where --commit goes over DTPS: the ``dtps:`` source's robot, or the robot at --kvstore; else None (ROS)."""
+    from .dtps_link import parse_dtps_spec
+
+    if str(args.source).startswith("dtps:"):
+        return parse_dtps_spec(args.source[5:], kvstore=args.kvstore)
+    if args.kvstore:
+        return parse_dtps_spec(run.robot, kvstore=args.kvstore)
+    return None
 
 
 def cmd_calibrate_extrinsics(args) -> int:
@@ -262,7 +274,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--square", type=float, default=0.031, help="square size in metres (default 0.031)")
 
     def common(sp):
-        sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images; live: "
+        sp.add_argument("--source", required=True, help="ROS 1 or ROS 2 bag, video file, folder or glob of images; live: "
+                        "dtps:ROBOT (its camera over DTPS, as duckietown-sdk; dtps:ROBOT@HOST:PORT), "
                         "ros:ROBOT (its camera topic via ROS_MASTER_URI), device:N (webcam), a stream URL")
         sp.add_argument("--topic", help="image topic in a bag (default: the one ending in /image/compressed)")
         sp.add_argument("--robot", help="robot name (default: from the bag topic /ROBOT/camera_node/...)")
@@ -280,6 +293,9 @@ def build_parser() -> argparse.ArgumentParser:
                           help="live sources: stop collecting after this long (default 300)")
         live.add_argument("--commit", action="store_true", help="also send the result to the robot (see README)")
         live.add_argument("--master-uri", help="the robot's ROS master (default $ROS_MASTER_URI)")
+        live.add_argument("--kvstore", metavar="URL",
+                          help="--commit over DTPS to this key-value store (default for a dtps:ROBOT source: "
+                               "http://ROBOT.local:11411/); with a recording, commits to --robot over DTPS")
         live.add_argument("--commit-timeout", type=float, default=10.0, help="seconds to wait for the robot")
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
