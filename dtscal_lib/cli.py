@@ -274,7 +274,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--square", type=float, default=0.031, help="square size in metres (default 0.031)")
 
     def common(sp):
-        sp.add_argument("--source", required=True, help="ROS 1 or ROS 2 bag, video file, folder or glob of images; live: "
+        sp.add_argument("--source", required=True,
+                        help="ROS 1 or ROS 2 bag, video file, folder or glob of images; live: "
                         "dtps:ROBOT (its camera over DTPS, as duckietown-sdk; dtps:ROBOT@HOST:PORT), "
                         "ros:ROBOT (its camera topic via ROS_MASTER_URI), device:N (webcam), a stream URL")
         sp.add_argument("--topic", help="image topic in a bag (default: the one ending in /image/compressed)")

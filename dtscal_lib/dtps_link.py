@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
 import re
 import threading
 from dataclasses import dataclass
@@ -49,7 +50,8 @@ class DtpsRobot:
 
     @property
     def kvstore_url(self) -> str:
-        return self.kvstore or f"http://{self.host}:{dt.KVSTORE_PORT}/"
+        """``kvstore``, else ``$DTSCAL_DTPS_KVSTORE`` (a test robot, a simulator), else ``http://HOST:11411/``."""
+        return self.kvstore or os.environ.get("DTSCAL_DTPS_KVSTORE") or f"http://{self.host}:{dt.KVSTORE_PORT}/"
 
     @property
     def camera(self) -> tuple[str, ...]:
