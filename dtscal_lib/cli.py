@@ -197,6 +197,10 @@ def cmd_calibrate_extrinsics(args) -> int:
         fr = run.frames()
         print(f"  frames: {fr['total']} read" + (f" of {fr['in_source']} (the first usable one is Duckietown's; "
               f"{fr['not_read']} not read)" if "in_source" in fr else "") + f", {fr['used']} used")
+        if run.upside_down:
+            from .ground import UPSIDE_DOWN_SAID
+
+            print(f"  {UPSIDE_DOWN_SAID}")
         if run.camera_pose:
             print(f"  camera {run.camera_pose['height_m']:.3f} m above the ground, looking "
                   f"{run.camera_pose['pitch_down_deg']:.1f} degrees down")

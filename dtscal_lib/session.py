@@ -694,7 +694,8 @@ class ExtrinsicSession:
         res = self.calibrate()
         return as_findings(ground_homography_doubts(res.H, self.camera.P[:, :3], board=self.board,
                                                     pattern_contrast=getattr(res, "pattern_contrast", None),
-                                                    profile=self.profile),
+                                                    profile=self.profile,
+                                                    upside_down=getattr(res, "upside_down", False)),
                            self.kind)
 
     @property

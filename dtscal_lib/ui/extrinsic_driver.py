@@ -22,6 +22,7 @@ from .. import calib_files
 from ..boards import DUCKIETOWN_BOARD, Board, ground_points
 from ..camera import CameraModel, rectify_image
 from ..errors import DtscalError, ImplausibleCalibrationError, Reason
+from ..ground import UPSIDE_DOWN_SAID
 from ..session import ExtrinsicSession, robot_name
 from ..sources.live import open_live
 from .driver import LoopDriver, dtps_link_of
@@ -188,6 +189,8 @@ class ExtrinsicDriver(LoopDriver):
         try:
             path = self.session.write(folder, keep_anyway=keep_anyway, fmt=fmt)
             text = f"SAVE: wrote {path} (best fit, frame {frame}, mean error {np.mean(best.residual_mm):.2f} mm)"
+            if best.upside_down:
+                text += f"; {UPSIDE_DOWN_SAID}"
             if self.session.doubts:
                 return (text + "; kept against the kit's doubts: " + "; ".join(map(str, self.session.doubts))
                         + ". It is not sent to the robot.", "error")
