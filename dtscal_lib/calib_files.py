@@ -117,7 +117,7 @@ def check_robot_name(robot: str) -> str:
     if not is_robot_name(robot):
         raise CalibrationFileError(
             f"robot name {robot[:80]!r} is not valid: a Duckiebot's name has letters, digits and '_' only (it names "
-            "its ROS topics /NAME/camera_node/...), e.g. --robot autobot01"
+            f"its ROS topics {dt.ros_name(dt.CAMERA_NODE, 'NAME')}/...), e.g. --robot autobot01"
         )
     return robot
 

@@ -270,6 +270,8 @@ def cmd_synth(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import duckietown as dt  # the names in the help (numpy is imported by the commands anyway)
+
     p = argparse.ArgumentParser(prog="dtscal", description="Duckietown camera-calibration kit")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -282,8 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="ROS 1 or ROS 2 bag, video file, folder or glob of images; live: "
                         "dtps:ROBOT (its camera over DTPS, as duckietown-sdk; dtps:ROBOT@HOST:PORT), "
                         "ros:ROBOT (its camera topic via ROS_MASTER_URI), device:N (webcam), a stream URL")
-        sp.add_argument("--topic", help="image topic in a bag (default: the one ending in /image/compressed)")
-        sp.add_argument("--robot", help="robot name (default: from the bag topic /ROBOT/camera_node/...)")
+        sp.add_argument("--topic", help=f"image topic in a bag (default: the one ending in {dt.IMAGE_SUFFIX})")
+        sp.add_argument("--robot", help="robot name (default: from the bag topic "
+                                        f"{dt.ros_name(dt.CAMERA_NODE, 'ROBOT')}/...)")
         sp.add_argument("--out", default="calibrations",
                         help="calibrations folder to write into (default ./calibrations)")
         sp.add_argument("--no-write", action="store_true", help="compute only, write no file")
@@ -300,7 +303,8 @@ def build_parser() -> argparse.ArgumentParser:
         live.add_argument("--master-uri", help="the robot's ROS master (default $ROS_MASTER_URI)")
         live.add_argument("--kvstore", metavar="URL",
                           help="--commit over DTPS to this key-value store (default for a dtps:ROBOT source: "
-                               "http://ROBOT.local:11411/); with a recording, commits to --robot over DTPS")
+                               f"http://ROBOT.local:{dt.KVSTORE_PORT}/); with a recording, commits to --robot "
+                               "over DTPS")
         live.add_argument("--commit-timeout", type=float, default=10.0, help="seconds to wait for the robot")
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
@@ -324,8 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the robot on the board (default: the one the board implies: --square 0.017 is the DD24's)")
     sp.add_argument("--format", choices=["classic", "2"], default="classic",
                     help="extrinsic file: classic flat homography (default) or Duckietown's newer version 2")
-    sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "
-                    "http://ROBOT.local/files/data/config/calibrations/camera_extrinsic/ROBOT.yaml)")
+    sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default " + dt.ROBOT_FILES_URL
+                    .format(host="ROBOT.local", kind="camera_extrinsic", robot="ROBOT") + ")")
     sp.set_defaults(func=cmd_calibrate_extrinsics)
 
     sp = sub.add_parser("compare", help="how far two intrinsic calibrations of one camera differ over the image")

@@ -19,11 +19,14 @@ FPS: int = 30
 
 #: ROS 1 topic templates; ``{robot}`` is the robot's name (dt-duckiebot-interface, ``camera_driver``'s
 #: ``camera_node``: ``~image/compressed``, ``~camera_info``, the ``~set_camera_info`` service)
-IMAGE_TOPIC = "/{robot}/camera_node/image/compressed"
-CAMERA_INFO_TOPIC = "/{robot}/camera_node/camera_info"
-SET_CAMERA_INFO_SERVICE = "/{robot}/camera_node/set_camera_info"
-#: the namespace of a Duckiebot's camera node (the ``camera_name`` of its intrinsic file)
 CAMERA_NODE = "/{robot}/camera_node"
+#: the camera topic's last part (a camera's ``image/compressed``, ROS's image_transport naming)
+IMAGE_SUFFIX = "/image/compressed"
+IMAGE_TOPIC = CAMERA_NODE + IMAGE_SUFFIX
+CAMERA_INFO_TOPIC = CAMERA_NODE + "/camera_info"
+#: the service ROS's calibrator's COMMIT calls (``sensor_msgs/SetCameraInfo``)
+SET_CAMERA_INFO = "set_camera_info"
+SET_CAMERA_INFO_SERVICE = CAMERA_NODE + "/" + SET_CAMERA_INFO
 #: the ROS master's port (ROS wiki, ``ROS_MASTER_URI``: ``http://localhost:11311`` by default)
 ROS_MASTER_PORT = 11311
 

@@ -93,7 +93,7 @@ def commit_intrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
     service = dt.ros_name(dt.SET_CAMERA_INFO_SERVICE, robot)
     request = json.dumps(camera_info_dict(calib, frame_id=f"{robot}/camera_optical_frame")).encode()
     try:
-        proc = run_ros_helper(["set_camera_info", service, f"{float(timeout):g}"], master=master_uri,
+        proc = run_ros_helper([dt.SET_CAMERA_INFO, service, f"{float(timeout):g}"], master=master_uri,
                               stdin=request, timeout=float(timeout) + 60.0)
     except DtscalError as exc:
         raise CommitError(f"cannot talk ROS to {robot}: {exc}. {_by_hand('camera_intrinsic', robot, calib_file)}") \
@@ -113,7 +113,7 @@ def commit_intrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
     advice = {
         "no_master": "check that the robot is on and that ROS_MASTER_URI (or --master-uri) points at it, "
                      f"e.g. http://{dt.DTPS_HOST.format(robot=robot)}:{dt.ROS_MASTER_PORT}",
-        "no_service": f"is the camera node of {robot} running? (`rosservice list | grep set_camera_info`)",
+        "no_service": f"is the camera node of {robot} running? (`rosservice list | grep {dt.SET_CAMERA_INFO}`)",
         "refused": "the camera node refused the calibration",
     }.get(answer.get("kind"), "")
     raise CommitError(f"COMMIT to {robot} failed: {answer.get('message')}" + (f"; {advice}" if advice else "")

@@ -27,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+from .. import duckietown as dt
 from ..boards import DUCKIETOWN_BOARD, Board
 from ..camera import DIST_MODELS
 from ..coverage import CoverageTracker
@@ -83,7 +84,7 @@ class LiveCalibrator(IntrinsicDriver):
         self.reconnect_button = w.Button(description="RECONNECT", icon="refresh")
         robot_link = "dtps" if self.spec.startswith("dtps:") else "ros" if self.spec.startswith("ros:") else "folder"
         self.commit_target = w.Dropdown(options=[("robot over DTPS (its key-value store)", "dtps"),
-                                                 ("robot over ROS (set_camera_info)", "ros"),
+                                                 (f"robot over ROS ({dt.SET_CAMERA_INFO})", "ros"),
                                                  ("calibration folder", "folder")],
                                         value=robot_link, description="commit to")
         self.robot_text = w.Text(value=self.robot, description="robot")
