@@ -1,7 +1,8 @@
 """Robot files far outside their robots' cameras load with a one-line warning (issue 21).
 
 The ranges are Duckietown's (limits.py ``robot_fx_per_width``: real Duckiebot files have fx 305-424 px at
-640 px, ``duckietown.md`` and the fleet's files with fx 417 and 424 (issue 30); ``dd24_fx_per_width``: the DD24's own intrinsic file, fx 154.59 px at 240 px).
+640 px, ``duckietown.md`` and the fleet's files with fx 417 and 424 (issue 30); ``dd24_fx_per_width``: the DD24's
+own intrinsic file, fx 154.59 px at 240 px).
 The files here are Duckietown's shipped default with only fx and fy changed to the values issue 21 met.
 """
 
