@@ -15,18 +15,27 @@ degrees, so only the perspective tells an upside-down camera (the near rows look
 
 from __future__ import annotations
 
-import json
+import subprocess
+import sys
 
 import cv2
 import numpy as np
+import pytest
 import yaml
-from test_board_layout import DEFAULT_H, REFUSED, _run, intrinsic_file
-from test_board_layout import frame as frame  # noqa: F401 - the module fixture: the printed board, drawn
-from test_dd24_reference import INTRINSICS, SQUARE, reference_frame
+from drawn_ground import DEFAULT_H, INTRINSICS, intrinsic_file, printed_board_frame, reference_frame
+from drawn_ground import DD24_SQUARE as SQUARE
 
+from dtscal_lib.boards import Board
+from dtscal_lib.errors import ImplausibleCalibrationError
 from dtscal_lib.ground import UPSIDE_DOWN_SAID
+from dtscal_lib.pipeline import calibrate_extrinsics
 
 W, H = 640, 480
+
+
+@pytest.fixture(scope="module")
+def frame() -> np.ndarray:
+    return printed_board_frame()
 TURN = np.array([[-1.0, 0, W - 1], [0, -1.0, H - 1], [0, 0, 1]])  # rotated pixel -> the upright camera's pixel
 
 
@@ -42,28 +51,25 @@ def upside_down_intrinsics(path):
     return path
 
 
-def _run_upside_down(tmp_path, image, name, *extra):
-    import subprocess
-    import sys
-
+def _frames(tmp_path, image, name):
     src = tmp_path / name
     src.mkdir()
     cv2.imwrite(str(src / "frame.png"), image)
-    out = tmp_path / f"out-{name}"
-    p = subprocess.run([sys.executable, "-m", "dtscal_lib.cli", "calibrate-extrinsics", "--source", str(src),
-                        "--intrinsics", str(upside_down_intrinsics(tmp_path / f"{name}.yaml")), "--robot",
-                        "layoutbot", "--out", str(out), "-q", *extra], capture_output=True, text=True, timeout=600,
-                       check=False)
-    return p, out / "camera_extrinsic" / "layoutbot.yaml"
+    return src
 
 
-def test_an_upside_down_camera_calibrates_says_so_and_projects_right(tmp_path, frame):  # noqa: F811
+def test_an_upside_down_camera_calibrates_says_so_and_projects_right(tmp_path, frame):
     turned = cv2.rotate(frame, cv2.ROTATE_180)
-    p, written = _run_upside_down(tmp_path, turned, "turned")
+    intrinsics = upside_down_intrinsics(tmp_path / "turned.yaml")
+    out = tmp_path / "out"
+    p = subprocess.run([sys.executable, "-m", "dtscal_lib.cli", "calibrate-extrinsics", "--source",
+                        str(_frames(tmp_path, turned, "turned")), "--intrinsics", str(intrinsics), "--robot",
+                        "layoutbot", "--out", str(out), "-q"], capture_output=True, text=True, timeout=600, check=False)
     assert p.returncode == 0, p.stderr
     said = [ln for ln in p.stdout.splitlines() if "upside down" in ln]
     assert said == [f"  {UPSIDE_DOWN_SAID}"], p.stdout
-    Hk = np.array(yaml.safe_load(written.read_text())["homography"], float).reshape(3, 3)
+    Hk = np.array(yaml.safe_load((out / "camera_extrinsic" / "layoutbot.yaml").read_text())["homography"],
+                  float).reshape(3, 3)
     # its right homography passes Duckietown's H[1][2] < 0 check; the fleet's 8 files of such robots with
     # H[1][2] > 0 ordered the corners by image position, which turns the ground about the board's centre
     assert Hk[1, 2] < 0
@@ -73,29 +79,23 @@ def test_an_upside_down_camera_calibrates_says_so_and_projects_right(tmp_path, f
     err = np.linalg.norm(got[:, :2] / got[:, 2:] - want[:, :2] / want[:, 2:], axis=1)
     assert err.max() < 0.005, err.max()  # metres: the near rows are the top ones, left is left
 
-    p, written = _run_upside_down(tmp_path, cv2.flip(turned, 1), "turned-mirrored")
-    assert p.returncode == REFUSED and "the board is seen mirrored" in p.stderr, p.stderr
-    assert not written.exists()
+    # turned and mirrored: still refused, nothing written for the robot
+    with pytest.raises(ImplausibleCalibrationError, match="the board is seen mirrored"):
+        calibrate_extrinsics(str(_frames(tmp_path, cv2.flip(turned, 1), "turned-mirrored")), intrinsics,
+                             robot="layoutbot", out_dir=tmp_path / "out-mirrored")
+    assert not (tmp_path / "out-mirrored" / "camera_extrinsic" / "layoutbot.yaml").exists()
 
 
-def test_a_camera_the_right_way_up_is_not_called_upside_down(tmp_path, frame):  # noqa: F811
-    p, _ = _run(tmp_path, frame, "upright")
-    assert p.returncode == 0 and json.loads(p.stdout)["upside_down"] is False, p.stderr
+def test_a_camera_the_right_way_up_is_not_called_upside_down(tmp_path, frame):
+    run = calibrate_extrinsics(str(_frames(tmp_path, frame, "upright")), intrinsic_file(tmp_path / "i.yaml"),
+                               robot="layoutbot", out_dir=None)
+    assert run.upside_down is False and run.to_dict()["upside_down"] is False
 
 
 def test_a_mirrored_dd24_frame_is_refused_as_a_mirrored_duckiebot_frame_is(tmp_path):
-    import subprocess
-    import sys
-
-    real = reference_frame()
-    for image, name, code in ((real, "dd24", 0), (cv2.flip(real, 1), "dd24-mirrored", REFUSED)):
-        src = tmp_path / name
-        src.mkdir()
-        cv2.imwrite(str(src / "frame.png"), image)
-        out = tmp_path / f"out-{name}"
-        p = subprocess.run([sys.executable, "-m", "dtscal_lib.cli", "calibrate-extrinsics", "--source", str(src),
-                            "--intrinsics", str(INTRINSICS), "--square", str(SQUARE), "--robot", "dronebot",
-                            "--out", str(out), "-q"], capture_output=True, text=True, timeout=600, check=False)
-        assert p.returncode == code, (name, p.stderr)
-        assert (out / "camera_extrinsic" / "dronebot.yaml").exists() == (code == 0)
-        assert ("the board is seen mirrored" in p.stderr) == (code == REFUSED), p.stderr
+    """The real-way-round frame calibrates as a DD24 (``test_dd24_reference``, exit 0); its mirror image does not."""
+    out = tmp_path / "out"
+    with pytest.raises(ImplausibleCalibrationError, match="the board is seen mirrored"):
+        calibrate_extrinsics(str(_frames(tmp_path, cv2.flip(reference_frame(), 1), "dd24-mirrored")), INTRINSICS,
+                             board=Board(7, 5, SQUARE), robot="dronebot", out_dir=out)
+    assert not (out / "camera_extrinsic" / "dronebot.yaml").exists()
