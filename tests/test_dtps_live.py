@@ -127,3 +127,15 @@ def test_frames_that_are_not_jpeg_are_counted_and_the_command_says_why(mode, rea
 def test_a_wrong_dtps_spec_says_how_to_write_one():
     with pytest.raises(SourceError, match="dtps:ROBOT"):
         open_live("dtps:not a robot")
+
+
+def test_an_extrinsic_file_goes_to_its_own_key(tmp_path):
+    path = calib_files.save_extrinsics(dt.default_H(), tmp_path, "testbot")
+    with DtpsRobotServer(step=40) as robot:
+        said = commit_dtps(parse_dtps_spec(robot.spec[5:], kvstore=robot.kvstore), path, kind="camera_extrinsic",
+                           timeout=10)
+        deadline = time.monotonic() + 5
+        while "camera_extrinsic" not in robot.stored and time.monotonic() < deadline:
+            time.sleep(0.05)
+    assert robot.stored == {"camera_extrinsic": {"homography": pytest.approx(dt.DEFAULT_HOMOGRAPHY)}}
+    assert said.startswith("stored as /data/config/calibrations/camera_extrinsic/testbot.yaml")
