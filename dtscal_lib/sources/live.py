@@ -588,7 +588,7 @@ class DtpsLive(LiveSource):
 
     def _gone(self, why: str) -> str:
         return (f"{self.dtps.robot}'s switchboard at {self.dtps.url} {why}: is the robot on and on this network "
-                f"(ping {self.dtps.host})? press Reconnect to try again")
+                f"(ping {self.dtps.host})? Then press Reconnect")
 
     async def _session(self, stop: threading.Event) -> None:
         import asyncio
@@ -627,7 +627,7 @@ class DtpsLive(LiveSource):
                 if not stop.is_set():
                     self._set_state("error", f"{self.dtps.url} answers but has no camera {self.topic}: check the "
                                              f"robot's name and camera (dtps:ROBOT/SENSOR; Duckietown's is "
-                                             f"{dt.DTPS_CAMERA_SENSOR}); press Reconnect to try again")
+                                             f"{dt.DTPS_CAMERA_SENSOR}), then press Reconnect")
                 return
             with contextlib.suppress(Exception):
                 rd = await asyncio.wait_for((camera / dt.DTPS_CAMERA_PARAMETERS).data_get(), self.connect_seconds)
