@@ -21,16 +21,24 @@ long window right after, without CALIBRATE (what the loop does on this machine a
 Part 3, memory: the recording looped as fast as it decodes until the source has delivered 18,000
 frames (ten minutes of camera at 30 fps) through the live loop; RSS at the start and at the end.
 
+Part 4, the robot's link: the recording published at 30 fps by a robot over DTPS (dtps-http's own server,
+Duckietown's topic and message types: ``tests/dtps_robot.py``) and over ROS 1 (a private ``roscore``, ROS's
+``rosbag play --loop`` on the Duckiebot's topic, the kit's rospy helper), one after the other in one run,
+into the live calibrator (``LiveCalibrator("dtps:ROBOT@...")`` / ``LiveCalibrator("ros:ROBOT")``): frames
+received and shown per second over 10 s, then CALIBRATE on the samples collected (its time).
+
 Usage::
 
     .venv/bin/python benchmarks/bench_live.py            # full (a few minutes)
     .venv/bin/python benchmarks/bench_live.py --quick    # fewer frames, 3,000 for the memory part
     .venv/bin/python benchmarks/bench_live.py --parts 2 --runs 5   # CALIBRATE only, five times, with ranges
+    .venv/bin/python benchmarks/bench_live.py --parts 4            # DTPS beside ROS 1
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import threading
@@ -235,6 +243,52 @@ def part_memory(n_frames: int) -> dict:
     return out
 
 
+@contextlib.contextmanager
+def dtps_robot():
+    """The recording on a robot's DTPS switchboard (dtps-http's server); yields the source spec."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from dtps_robot import DtpsRobotServer
+
+    with DtpsRobotServer(fps=30.0) as robot:
+        yield robot.spec
+
+
+@contextlib.contextmanager
+def ros1_robot(tmp: Path):
+    """The recording played onto a Duckiebot's topic by ``rosbag play --loop`` on a private roscore."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from ros_env import ROBOT, _ros_tool, _started, running_roscore
+
+    with running_roscore(tmp) as env:
+        os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME") if k in env})
+        with _started([_ros_tool("rosbag"), "play", "--quiet", "--loop", str(BAG)], env, tmp / "play.log"):
+            yield f"ros:{ROBOT}"
+
+
+def part_sources(seconds: float = 10.0) -> list[dict]:
+    """Frames received and shown per second from each robot link, then CALIBRATE's time on what was collected."""
+    import tempfile
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="dtscal-bench-live-") as tmp:
+        for name, robot in (("DTPS (dtps-http switchboard, duckietown-messages)", dtps_robot()),
+                            ("ROS 1 (roscore, rosbag play, rospy helper)", ros1_robot(Path(tmp)))):
+            with robot as spec:
+                app = LiveCalibrator(spec, calibration_dir=tmp)
+                wait_for(lambda app=app: app.source.status.state == "running", 60)
+                received0, shown0, t0 = app.source.status.frames, app.loop.shown, time.perf_counter()
+                time.sleep(seconds)
+                dt_s = time.perf_counter() - t0
+                received, shown = app.source.status.frames - received0, app.loop.shown - shown0
+                wait_for(lambda app=app: not app.calibrate_button.disabled, 120)
+                app.calibrate(wait=True)
+                rows.append({"name": name, "received_fps": received / dt_s, "shown_fps": shown / dt_s,
+                             "samples": len(app.samples), "calibrate_s": app.calibrate_seconds,
+                             "ok": app.result is not None})
+                app.close()
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer frames (memory part: 3,000)")
@@ -282,6 +336,16 @@ def main(argv=None) -> int:
                 print(f"  {which}, {len(cs)} runs: CALIBRATE {rng('seconds')} ms, cv2 {rng('baseline')} ms; "
                       f"longest gap {rng('gap')} ms, ROS-style {rng('baseline_gap')} ms, "
                       f"without CALIBRATE {rng('ref_gap')} ms")
+    if "4" in parts:
+        print("Part 4: the robot's link, the recording published at 30 fps, 10 s into the live calibrator")
+        rows = part_sources()
+        for r in rows:
+            print(f"  {r['name']:52s} received {r['received_fps']:5.1f} fps, shown {r['shown_fps']:5.1f} fps; "
+                  f"CALIBRATE on {r['samples']} samples {r['calibrate_s'] * 1e3:.0f} ms")
+            ok &= r["ok"]
+        if len(rows) == 2 and rows[1]["shown_fps"] > 0:
+            print(f"  DTPS / ROS 1: shown fps ratio {rows[0]['shown_fps'] / rows[1]['shown_fps']:.2f}, CALIBRATE "
+                  f"time ratio {rows[0]['calibrate_s'] / rows[1]['calibrate_s']:.2f}")
     if "3" in parts:
         n = 3000 if args.quick else 18000
         m = part_memory(n)

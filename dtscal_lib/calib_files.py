@@ -116,7 +116,7 @@ def check_robot_name(robot: str) -> str:
     if not is_robot_name(robot):
         raise CalibrationFileError(
             f"robot name {robot[:80]!r} is not valid: a Duckiebot's name has letters, digits and '_' only (it names "
-            "its ROS topics /NAME/camera_node/...), e.g. --robot autobot01"
+            f"its ROS topics {dt.ros_name(dt.CAMERA_NODE, 'NAME')}/...), e.g. --robot autobot01"
         )
     return robot
 
@@ -513,7 +513,7 @@ def load_intrinsics(path) -> IntrinsicCalibration:
 
 
 def _warn_outside_profile(calib: "IntrinsicCalibration", where: str) -> None:
-    """One line when the file's focal lengths lie far outside those of the robots of its kind (portrait
+    """One line when the file's focal lengths lie outside those of the real robots of its kind (portrait
     frames: the DD24's, else the Duckiebot's fleet; :mod:`dtscal_lib.profiles`): loaded, but named."""
     from .profiles import profile_for_image
 
@@ -521,8 +521,9 @@ def _warn_outside_profile(calib: "IntrinsicCalibration", where: str) -> None:
     lo, hi = prof.fx_per_width
     fx, fy = float(calib.K[0, 0]), float(calib.K[1, 1])
     if not all(lo <= f / calib.width <= hi for f in (fx, fy)):
-        _warn(where, f"fx {fx:.0f} / fy {fy:.0f} px at {calib.width} px wide lie far outside a {prof.name}'s cameras "
-                     f"({lo * calib.width:.0f}-{hi * calib.width:.0f} px): another camera, or a calibration to redo")
+        _warn(where, f"fx {fx:.0f} / fy {fy:.0f} px at {calib.width} px wide lie outside every real {prof.name}'s "
+                     f"camera ({lo * calib.width:.0f}-{hi * calib.width:.0f} px): another camera, or a calibration to "
+                     "redo")
 
 
 def validate_homography(H, where: str = "homography", *, writing: bool = False,

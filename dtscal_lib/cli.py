@@ -163,12 +163,24 @@ def _commit(args, run, kind: str):
     if not args.commit or run.doubts:  # a result the kit refused is never sent to the robot
         return None, None
     try:
+        link = _dtps_link(args, run)
         if kind == "intrinsics":
-            return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout), None
+            return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout, dtps=link), None
         return run.session.commit(master_uri=args.master_uri, timeout=args.commit_timeout, url=args.upload_url,
-                                  fmt=args.format), None
+                                  fmt=args.format, dtps=link), None
     except CommitError as exc:
         return None, exc
+
+
+def _dtps_link(args, run):
+    """Where --commit goes over DTPS: the ``dtps:`` source's robot, or the robot at --kvstore; else None (ROS)."""
+    from .dtps_link import parse_dtps_spec
+
+    if str(args.source).startswith("dtps:"):
+        return parse_dtps_spec(args.source[5:], kvstore=args.kvstore)
+    if args.kvstore:
+        return parse_dtps_spec(run.robot, kvstore=args.kvstore)
+    return None
 
 
 def cmd_calibrate_extrinsics(args) -> int:
@@ -193,6 +205,10 @@ def cmd_calibrate_extrinsics(args) -> int:
         fr = run.frames()
         print(f"  frames: {fr['total']} read" + (f" of {fr['in_source']} (the first usable one is Duckietown's; "
               f"{fr['not_read']} not read)" if "in_source" in fr else "") + f", {fr['used']} used")
+        if run.upside_down:
+            from .ground import UPSIDE_DOWN_SAID
+
+            print(f"  {UPSIDE_DOWN_SAID}")
         if run.camera_pose:
             print(f"  camera {run.camera_pose['height_m']:.3f} m above the ground, looking "
                   f"{run.camera_pose['pitch_down_deg']:.1f} degrees down")
@@ -262,6 +278,8 @@ def cmd_synth(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import duckietown as dt  # the names in the help (numpy is imported by the commands anyway)
+
     p = argparse.ArgumentParser(prog="dtscal", description="Duckietown camera-calibration kit")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -278,10 +296,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "(calib.io's legacy switch; matters for an even number of rows)")
 
     def common(sp):
-        sp.add_argument("--source", required=True, help="ROS 1 bag, video file, folder or glob of images; live: "
+        sp.add_argument("--source", required=True,
+                        help="ROS 1 or ROS 2 bag, video file, folder or glob of images; live: "
+                        "dtps:ROBOT (its camera over DTPS, as duckietown-sdk; dtps:ROBOT@HOST:PORT), "
                         "ros:ROBOT (its camera topic via ROS_MASTER_URI), device:N (webcam), a stream URL")
-        sp.add_argument("--topic", help="image topic in a bag (default: the one ending in /image/compressed)")
-        sp.add_argument("--robot", help="robot name (default: from the bag topic /ROBOT/camera_node/...)")
+        sp.add_argument("--topic", help=f"image topic in a bag (default: the one ending in {dt.IMAGE_SUFFIX})")
+        sp.add_argument("--robot", help="robot name (default: from the bag topic "
+                                        f"{dt.ros_name(dt.CAMERA_NODE, 'ROBOT')}/...)")
         sp.add_argument("--out", default="calibrations",
                         help="calibrations folder to write into (default ./calibrations)")
         sp.add_argument("--no-write", action="store_true", help="compute only, write no file")
@@ -296,6 +317,10 @@ def build_parser() -> argparse.ArgumentParser:
                           help="live sources: stop collecting after this long (default 300)")
         live.add_argument("--commit", action="store_true", help="also send the result to the robot (see README)")
         live.add_argument("--master-uri", help="the robot's ROS master (default $ROS_MASTER_URI)")
+        live.add_argument("--kvstore", metavar="URL",
+                          help="--commit over DTPS to this key-value store (default for a dtps:ROBOT source: "
+                               f"http://ROBOT.local:{dt.KVSTORE_PORT}/); with a recording, commits to --robot "
+                               "over DTPS")
         live.add_argument("--commit-timeout", type=float, default=10.0, help="seconds to wait for the robot")
 
     sp = sub.add_parser("calibrate-intrinsics", help="intrinsic calibration from a recording")
@@ -319,8 +344,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the robot on the board (default: the one the board implies: --square 0.017 is the DD24's)")
     sp.add_argument("--format", choices=["classic", "2"], default="classic",
                     help="extrinsic file: classic flat homography (default) or Duckietown's newer version 2")
-    sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default "
-                    "http://ROBOT.local/files/data/config/calibrations/camera_extrinsic/ROBOT.yaml)")
+    sp.add_argument("--upload-url", help="--commit: where to POST the extrinsic file (default " + dt.ROBOT_FILES_URL
+                    .format(host="ROBOT.local", kind="camera_extrinsic", robot="ROBOT") + ")")
     sp.set_defaults(func=cmd_calibrate_extrinsics)
 
     sp = sub.add_parser("compare", help="how far two intrinsic calibrations of one camera differ over the image")

@@ -14,16 +14,73 @@ IMAGE_SIZE: tuple[int, int] = (640, 480)
 #: default frame rate of the camera node
 FPS: int = 30
 
-#: topic templates; ``{robot}`` is the robot's name
-IMAGE_TOPIC = "/{robot}/camera_node/image/compressed"
-CAMERA_INFO_TOPIC = "/{robot}/camera_node/camera_info"
-SET_CAMERA_INFO_SERVICE = "/{robot}/camera_node/set_camera_info"
+# --- names: every topic, service, path and port of Duckietown's the kit uses, each with its source.
+# No other module spells them out (tests/test_duckietown_names.py looks for copies).
+
+#: ROS 1 topic templates; ``{robot}`` is the robot's name (dt-duckiebot-interface, ``camera_driver``'s
+#: ``camera_node``: ``~image/compressed``, ``~camera_info``, the ``~set_camera_info`` service)
+CAMERA_NODE = "/{robot}/camera_node"
+#: the camera topic's last part (a camera's ``image/compressed``, ROS's image_transport naming)
+IMAGE_SUFFIX = "/image/compressed"
+IMAGE_TOPIC = CAMERA_NODE + IMAGE_SUFFIX
+CAMERA_INFO_TOPIC = CAMERA_NODE + "/camera_info"
+#: the service ROS's calibrator's COMMIT calls (``sensor_msgs/SetCameraInfo``)
+SET_CAMERA_INFO = "set_camera_info"
+SET_CAMERA_INFO_SERVICE = CAMERA_NODE + "/" + SET_CAMERA_INFO
+#: the ROS master's port (ROS wiki, ``ROS_MASTER_URI``: ``http://localhost:11311`` by default)
+ROS_MASTER_PORT = 11311
+
+#: DTPS, Duckietown's pub-sub over HTTP: a robot's switchboard listens on ``<ROBOT>.local:11911``
+#: (duckietown-sdk, ``robots/duckiebot/generic.py``: ``DEFAULT_ROBOT_SWITCHBOARD_PORT``; the simulator,
+#: Duckiematrix, on 127.0.0.1:7501, ``DEFAULT_DUCKIEMATRIX_PORT``)
+DTPS_HOST = "{robot}.local"
+DTPS_SWITCHBOARD_PORT = 11911
+DTPS_DUCKIEMATRIX_PORT = 7501
+#: the camera a robot's SDK reads by default (duckietown-sdk ``DB21J.camera``: ``front_center``)
+DTPS_CAMERA_SENSOR = "front_center"
+#: a camera's queues on the switchboard, ``<ROBOT>/sensor/camera/<SENSOR>/...`` (dt-duckiebot-interface,
+#: ``camera_driver_abs.py``: ``jpeg`` a ``CompressedImage``, ``parameters`` a ``CameraIntrinsicCalibration``,
+#: ``info`` a ``Camera``; duckietown-sdk ``DTPSCameraDriver`` reads ``jpeg``)
+DTPS_CAMERA_PATH = ("{robot}", "sensor", "camera", "{sensor}")
+DTPS_CAMERA_JPEG = "jpeg"
+DTPS_CAMERA_PARAMETERS = "parameters"
+DTPS_CAMERA_INFO = "info"
+#: the robot's key-value store over DTPS (duckietown/dt-kvstore, ``packages/kvstore/main.py``: port 11411;
+#: ``/data/config/calibrations/<kind>/<ROBOT>.yaml`` is the read-write queue ``data/calibration/<kind>/current``,
+#: written back to that file with ``yaml.dump``; the camera driver subscribes to
+#: ``calibration/camera_intrinsic/current`` and republishes its ``parameters``)
+KVSTORE_PORT = 11411
+KVSTORE_CALIBRATION = ("data", "calibration", "{kind}", "current")
 
 #: where the robot keeps calibrations, relative to its config root (``/data/config``)
 INTRINSIC_DIR = "calibrations/camera_intrinsic"
 EXTRINSIC_DIR = "calibrations/camera_extrinsic"
 ROBOT_CONFIG_ROOT = "/data/config"
+ROBOT_CALIBRATIONS = ROBOT_CONFIG_ROOT + "/calibrations"
 DEFAULT_NAME = "default"
+#: the robot's file server, to which Duckietown's current extrinsic tool POSTs the extrinsic file
+#: (lib-dt-computer-vision / dt-files-api: ``http://<ROBOT>.local/files/data/config/...``)
+ROBOT_FILES_URL = "http://{host}/files" + ROBOT_CALIBRATIONS + "/{kind}/{robot}.yaml"
+#: the robot's login for ``scp`` (Duckietown's SD-card images: user ``duckie``)
+ROBOT_USER = "duckie"
+#: the container that runs the camera driver (``dts duckiebot``: ``duckiebot-interface``)
+INTERFACE_CONTAINER = "duckiebot-interface"
+
+
+def ros_name(template: str, robot: str) -> str:
+    """A ROS name of :data:`IMAGE_TOPIC` & co. for ``robot``."""
+    return template.format(robot=robot)
+
+
+def dtps_camera_path(robot: str, sensor: str = DTPS_CAMERA_SENSOR) -> tuple[str, ...]:
+    """The switchboard path of a camera: ``(robot, "sensor", "camera", sensor)``."""
+    return tuple(c.format(robot=robot, sensor=sensor) for c in DTPS_CAMERA_PATH)
+
+
+def kvstore_calibration_path(kind: str) -> tuple[str, ...]:
+    """The kvstore queue of ``/data/config/calibrations/<kind>/<ROBOT>.yaml`` (kind ``camera_intrinsic``...)."""
+    return tuple(c.format(kind=kind) for c in KVSTORE_CALIBRATION)
+
 
 #: the shipped ``camera_intrinsic/default.yaml``, value for value
 DEFAULT_INTRINSICS: dict = {

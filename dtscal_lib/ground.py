@@ -154,6 +154,8 @@ class ExtrinsicResult:
     image_center_ground : (2,) float64 ground point of the rectified image's centre, metres
     pattern_contrast : :func:`board_pattern_contrast` of the board as ordered on the ground (grey
         levels; negative when the frame is mirrored), None when the board's pattern cannot tell
+    upside_down : the camera is mounted rotated by 180 degrees (:func:`is_upside_down`: the board's near
+        rows are at the top of the image); ``H`` maps its raw, rotated image, as the robot sees it
     """
 
     H: np.ndarray
@@ -163,6 +165,7 @@ class ExtrinsicResult:
     rectified: np.ndarray
     image_center_ground: np.ndarray
     pattern_contrast: float | None = None
+    upside_down: bool = False
 
     def to_dict(self) -> dict:
         """Plain-Python summary (no image) for JSON/YAML reports."""
@@ -176,6 +179,7 @@ class ExtrinsicResult:
             "ground": self.ground.tolist(),
             "image_center_ground": [float(v) for v in self.image_center_ground],
             "pattern_contrast": None if self.pattern_contrast is None else float(self.pattern_contrast),
+            "upside_down": bool(self.upside_down),
         }
 
 
@@ -271,6 +275,9 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
         ordered = order_for_ground(corners, board)
     except DtscalError as e:
         raise CalibrationError(str(e), reason=Reason.BOARD_ORDER) from e
+    upside_down = is_upside_down(ordered, board)
+    if upside_down:  # the near rows are the top ones: the grid's ground order turned by 180 degrees
+        ordered = ordered[::-1].copy()
     ground = ground_points(board, profile.near_row_x, profile.right_column_y)
     H = estimate_ground_homography(ordered, ground, method=method)
     if profile.corrupt_rule and dt.homography_is_corrupt(H):
@@ -287,7 +294,32 @@ def extrinsics_from_image(image: np.ndarray, camera: CameraModel, board: Board =
         raise CalibrationError("the image centre lies on the horizon of the fitted homography; "
                                "the camera must look down at the ground", reason=Reason.HORIZON) from None
     contrast = board_pattern_contrast(rectified, ordered, board) if profile.colours_known else None
-    return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground, contrast)
+    return ExtrinsicResult(H, ordered, ground, residual_mm, rectified, centre_ground, contrast, upside_down)
+
+
+#: the far row of corners must look this much wider than the near one before a camera is called upside-down:
+#: a camera looking straight down sees both alike (ratio 1); Duckietown's default Duckiebot view has the near row
+#: 1.50 times as wide as the far one (the default homography, rows at x = 0.191 and 0.315 m) and the DD24's
+#: reference view 1.31 times (its scenario0 homography); 5 % keeps a near-vertical view in image order
+UPSIDE_DOWN_MIN_RATIO = 1.05
+#: the one line that says it (command line, notebook 06)
+UPSIDE_DOWN_SAID = ("the camera is mounted upside down (its image is rotated 180 degrees; the board's near rows are "
+                    "at the top): calibrated as it is mounted, its raw images to the ground")
+
+
+def is_upside_down(ordered, board: Board = DUCKIETOWN_BOARD) -> bool:
+    """Is the camera mounted upside down? The perspective tells: near rows of the board look wider.
+
+    ``ordered`` are the rectified corners in ground order as :func:`~dtscal_lib.boards.order_for_ground` puts
+    them from their image position (the row at the bottom of the image first). The printed board is the same
+    turned by 180 degrees (both its near-right and far-left corner squares are white, ``duckietown.md``), so only
+    the perspective can tell a camera mounted upside down: when the row ordered first (nearest, for a camera the
+    right way up) looks narrower than the last by :data:`UPSIDE_DOWN_MIN_RATIO`, the top of the image is near.
+    """
+    g = np.asarray(ordered, dtype=np.float64).reshape(board.rows, board.cols, 2)
+    near = np.linalg.norm(g[0, -1] - g[0, 0])
+    far = np.linalg.norm(g[-1, -1] - g[-1, 0])
+    return bool(far > near * UPSIDE_DOWN_MIN_RATIO)
 
 
 def _origin(profile: RobotProfile, short: bool = False) -> str:
@@ -374,7 +406,7 @@ def _turned_board(H, board: Board, profile: RobotProfile) -> np.ndarray:
 
 
 def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD, pattern_contrast: float | None = None,
-                             profile: RobotProfile | None = None) -> list[Finding]:
+                             profile: RobotProfile | None = None, upside_down: bool | None = None) -> list[Finding]:
     """Reasons to disbelieve that ``H`` shows a Duckiebot's camera looking down at the ground ahead.
 
     The pose of :func:`camera_pose_from_homography` is checked against :data:`GROUND_CAMERA_LIMITS`
@@ -387,7 +419,8 @@ def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD, pattern_c
     ``H[1][2] > 0`` is not a doubt by itself: Duckietown refuses to *write* such a homography, but its
     fleet has them, from cameras mounted upside-down (the image rotated 180 degrees, the corners
     ordered by their image position, so the ground comes out turned about the board's centre);
-    such a file is judged as that camera, turned back.
+    such a file is judged as that camera, turned back. ``upside_down=True`` says ``H`` is the kit's own fit of an
+    upside-down camera (:func:`is_upside_down`), already right: it is judged as it is.
 
     >>> from dtscal_lib import duckietown as dt
     >>> from dtscal_lib.camera import CameraModel
@@ -404,7 +437,7 @@ def ground_homography_doubts(H, K, *, board: Board = DUCKIETOWN_BOARD, pattern_c
     def doubt(code, message, advice):
         out.append(Finding(code, "bad", message, advice))
 
-    rotated = profile.corrupt_rule and dt.homography_is_corrupt(H)
+    rotated = profile.corrupt_rule and not upside_down and dt.homography_is_corrupt(H)
     pose = camera_pose_from_homography(_turned_board(H, board, profile) if rotated else H, K, profile.near_row_x)
     place = ("place the robot on the board as instructed and check --square and --board against the printed "
              "board")

@@ -221,11 +221,16 @@ TABLE: tuple[Limit, ...] = (
           "show it: +125 and +254 grey levels the right way round, -125 and -254 mirrored (issue 21); 10 is "
           "far below both and above the noise of a grey level's mean over 24 squares"),
     # ------------------------------------------------------------------ robot profiles (dtscal_lib.profiles)
-    Limit("robot_fx_per_width", (0.381, 0.744), "fx / image width", "loading a Duckiebot's intrinsic file: "
+    Limit("robot_fx_per_width", (0.4765, 0.6625), "fx / image width", "loading a Duckiebot's intrinsic file: "
           "a one-line warning",
-          "20 % beyond the fleet's range either way: a file outside is another camera or a wrong calibration "
-          "(fx 1691 / fy 1412 is a 21-degree lens, fx 237 a fisheye's), loaded but named",
-          "duckietown.md: real per-robot intrinsic files have fx 305-397 px at 640 px (0.477-0.620 of the width)"),
+          "the fleet's real files, no margin: a file like a real robot's loads silently (the real fx 417 and 424 "
+          "included), one outside every real robot's is another camera or a wrong calibration (fx 1691 / fy 1412 "
+          "is a 21-degree lens, fx 237 a fisheye's), loaded but named; was 244-476 px (20 % beyond 305-397), "
+          "which let 430-476 px pass unnamed",
+          "duckietown.md: real per-robot intrinsic files have fx 305-397 px at 640 px; duckietown/duckiefleet "
+          "calibrations/camera_intrinsic/ also holds real robots with fx 417 and 424 px (issue 30), so 305-424 px "
+          "(0.4765-0.6625 of the width); a sample of six more (megabot01 336.5, megabot15 336.6, student20 "
+          "322.8, hugo 358.2, raven 333.3, watchtower01 335.4) lies inside"),
     Limit("dd24_fx_per_width", (0.515, 0.773), "fx / image width", "loading a DD24 intrinsic file: a one-line "
           "warning",
           "20 % either way of the one real DD24 file, as for the Duckiebot",

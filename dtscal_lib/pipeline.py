@@ -161,6 +161,8 @@ class ExtrinsicRun:
     session: ExtrinsicSession | None = field(default=None, repr=False)
     #: frames the source holds (None for a live camera): the run reads only up to the first usable one
     frames_in_source: int | None = None
+    #: the camera is mounted upside down (:func:`~dtscal_lib.ground.is_upside_down`)
+    upside_down: bool = False
 
     def frames(self) -> dict:
         """The frame counts: ``total`` read, ``used``, ``rejected`` by reason and, for a recording,
@@ -184,6 +186,7 @@ class ExtrinsicRun:
             "output": str(self.path) if self.path else None,
             "camera_pose": dict(self.camera_pose),
             "doubts": [str(d) for d in self.doubts],
+            "upside_down": bool(self.upside_down),
         }
 
 
@@ -225,7 +228,7 @@ def calibrate_extrinsics(source_spec, intrinsics_file, *, board: Board = DUCKIET
     res = session.calibrate()
     run = ExtrinsicRun(session.robot, res.H, session.best_frame, session.tally(), np.asarray(res.residual_mm),
                        np.asarray(res.image_center_ground), session.source, camera_pose=session.camera_pose(),
-                       session=session, frames_in_source=in_source)
+                       session=session, frames_in_source=in_source, upside_down=bool(res.upside_down))
     run.path = session.write(out_dir, keep_anyway, fmt)
     run.doubts = session.doubts
     return run

@@ -11,8 +11,10 @@ Two robots, each from Duckietown's own files (``duckietown.md``; lib-dt-computer
 * **dd24** (the Duckiedrone DD24): the 7x5-corner board of 17 mm squares, its outer corner at x = 0.25 m,
   y = -0.080 m (``CalibrationBoardDD24``), a portrait camera (its intrinsic file: 240x320, photographs 480x640);
   the camera about 5.6 cm above the board and 47 degrees down, so the image's top-left pixel lies below the
-  horizon, ahead on the left, and ``H[1][2] > 0`` is its normal sign. The colours of its A4 print
-  (``camera_calibration_pattern_A4_rev0824``) are not known to the kit: no mirror judgement for it.
+  horizon, ahead on the left, and ``H[1][2] > 0`` is its normal sign. Its A4 print
+  (``camera_calibration_pattern_A4_rev0824``) has the Duckiebot's convention, read off Duckietown's real DD24
+  photograph (``duckietown.md``): the corner square nearest the drone on its right is white, so a mirrored DD24
+  frame is refused as a mirrored Duckiebot frame is.
 
 The board implies the profile (:func:`profile_for`); ``--robot-type`` overrides it.
 """
@@ -42,7 +44,7 @@ class RobotProfile:
     #: the camera's plausible pose over the ground (rows of :mod:`dtscal_lib.limits`)
     height_m: tuple[float, float]
     pitch_down_deg: tuple[float, float]
-    #: fx / image width of the robots' real intrinsic files (a file far outside loads with a warning)
+    #: fx / image width of the robots' real intrinsic files (a file outside loads with a warning)
     fx_per_width: tuple[float, float]
     #: Duckietown's "H[1][2] > 0 is corrupt" rule applies (the Duckiebot's; not the DD24's)
     corrupt_rule: bool
@@ -64,7 +66,7 @@ DUCKIEBOT = RobotProfile("duckiebot", Board(7, 5, 0.031), 0.191, -0.093, (640, 4
 #: Duckietown's Duckiedrone DD24 (boards.py ``CalibrationBoardDD24``: 0.25 + 0.017, -0.080 + 0.017)
 DD24 = RobotProfile("dd24", Board(7, 5, 0.017), 0.267, -0.063, (480, 640),
                     LIMITS["dd24_camera_height"].value, LIMITS["dd24_camera_pitch"].value,
-                    LIMITS["dd24_fx_per_width"].value, corrupt_rule=False, colours_known=False)
+                    LIMITS["dd24_fx_per_width"].value, corrupt_rule=False, colours_known=True)
 
 PROFILES: dict[str, RobotProfile] = {p.name: p for p in (DUCKIEBOT, DD24)}
 

@@ -1,6 +1,14 @@
-"""COMMIT: send a calibration to a Duckiebot.
+"""COMMIT: send a calibration to a robot, over DTPS (today's robots) or over ROS 1.
 
-* Intrinsics go where ROS's ``cameracalibrator`` sends them: the camera node's
+* **Over DTPS** (:func:`commit_dtps`; a Duckiebot on ``ente`` and a DD24-B): the robot's key-value store
+  (``dt-kvstore``, ``<ROBOT>.local:11411``) serves ``/data/config/calibrations/<kind>/<ROBOT>.yaml`` as the
+  read-write queue ``data/calibration/<kind>/current``. COMMIT publishes the file's content there (a CBOR
+  mapping, as the store's ``YAMLFileAdapter`` expects), reads the queue back and says so only when the robot
+  holds exactly what was sent; the store writes the file, and the camera driver, subscribed to
+  ``calibration/camera_intrinsic/current``, takes the new intrinsics at once (dt-duckiebot-interface,
+  ``camera_driver_abs.py``). A robot whose image has no key-value store (older ``ente`` images) refuses
+  with a connection error: the message says what to copy where.
+* Over ROS 1, intrinsics go where ROS's ``cameracalibrator`` sends them: the camera node's
   ``/<ROBOT>/camera_node/set_camera_info`` service (``sensor_msgs/SetCameraInfo``). The
   Duckiebot's camera node writes what it receives to
   ``/data/config/calibrations/camera_intrinsic/<ROBOT>.yaml`` and answers with a status message.
@@ -24,10 +32,11 @@ from pathlib import Path
 
 
 from . import calib_files, safe_yaml
+from . import duckietown as dt
 from .errors import DtscalError
 
 #: where the robot keeps its calibrations
-ROBOT_CALIBRATIONS = "/data/config/calibrations"
+ROBOT_CALIBRATIONS = dt.ROBOT_CALIBRATIONS
 
 
 class CommitError(DtscalError):
@@ -41,9 +50,10 @@ def _robot(robot: str) -> str:
 
 
 def _by_hand(kind: str, robot: str, calib_file) -> str:
+    host = dt.DTPS_HOST.format(robot=robot)
     return (f"the file {calib_file} is kept; to install it by hand: scp {calib_file} "
-            f"duckie@{robot}.local:{ROBOT_CALIBRATIONS}/{kind}/{robot}.yaml and restart the robot's interface "
-            f"container (`dts duckiebot ...` or `docker -H {robot}.local restart duckiebot-interface`)")
+            f"{dt.ROBOT_USER}@{host}:{ROBOT_CALIBRATIONS}/{kind}/{robot}.yaml and restart the robot's interface "
+            f"container (`docker -H {host} restart {dt.INTERFACE_CONTAINER}`)")
 
 
 def camera_info_dict(calib: calib_files.IntrinsicCalibration, frame_id: str = "") -> dict:
@@ -80,10 +90,10 @@ def commit_intrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
         calib = calib_files.load_intrinsics(calib_file)
     except DtscalError as exc:
         raise CommitError(f"nothing was sent to {robot}: {exc}") from None
-    service = f"/{robot}/camera_node/set_camera_info"
+    service = dt.ros_name(dt.SET_CAMERA_INFO_SERVICE, robot)
     request = json.dumps(camera_info_dict(calib, frame_id=f"{robot}/camera_optical_frame")).encode()
     try:
-        proc = run_ros_helper(["set_camera_info", service, f"{float(timeout):g}"], master=master_uri,
+        proc = run_ros_helper([dt.SET_CAMERA_INFO, service, f"{float(timeout):g}"], master=master_uri,
                               stdin=request, timeout=float(timeout) + 60.0)
     except DtscalError as exc:
         raise CommitError(f"cannot talk ROS to {robot}: {exc}. {_by_hand('camera_intrinsic', robot, calib_file)}") \
@@ -102,8 +112,8 @@ def commit_intrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
         return str(answer.get("message", ""))
     advice = {
         "no_master": "check that the robot is on and that ROS_MASTER_URI (or --master-uri) points at it, "
-                     f"e.g. http://{robot}.local:11311",
-        "no_service": f"is the camera node of {robot} running? (`rosservice list | grep set_camera_info`)",
+                     f"e.g. http://{dt.DTPS_HOST.format(robot=robot)}:{dt.ROS_MASTER_PORT}",
+        "no_service": f"is the camera node of {robot} running? (`rosservice list | grep {dt.SET_CAMERA_INFO}`)",
         "refused": "the camera node refused the calibration",
     }.get(answer.get("kind"), "")
     raise CommitError(f"COMMIT to {robot} failed: {answer.get('message')}" + (f"; {advice}" if advice else "")
@@ -116,7 +126,7 @@ def robot_files_url(robot: str, master_uri: str | None = None, kind: str = "came
     The host is that of ``master_uri`` when given (the robot runs its master), else ``<robot>.local``.
     """
     host = urllib.parse.urlparse(master_uri).hostname if master_uri else None
-    return f"http://{host or robot + '.local'}/files{ROBOT_CALIBRATIONS}/{kind}/{robot}.yaml"
+    return dt.ROBOT_FILES_URL.format(host=host or dt.DTPS_HOST.format(robot=robot), kind=kind, robot=robot)
 
 
 def commit_extrinsics(robot: str, calib_file, *, master_uri: str | None = None, timeout: float = 10.0,
@@ -129,20 +139,11 @@ def commit_extrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
     """
     robot = _robot(robot)
     path = Path(calib_file)
+    _file_content("camera_extrinsic", robot, path)  # validated before anything is sent
     try:
-        text = safe_yaml.read_text_file(path)  # regular files only, within the size limit
-        body = text.encode("utf-8")
-        doc = safe_yaml.load_yaml_text(text, str(path))
-        if not isinstance(doc, dict) or "homography" not in doc:
-            raise CommitError(f"{path} is not an extrinsic file (no homography:); nothing was sent")
-        if "version" not in doc:
-            calib_files.load_extrinsics(path)  # validate the classic file before sending it
-    except OSError as exc:
+        body = safe_yaml.read_text_file(path).encode("utf-8")  # regular files only, within the size limit
+    except (OSError, DtscalError) as exc:
         raise CommitError(f"cannot read {path} ({exc}); nothing was sent") from None
-    except CommitError:
-        raise
-    except DtscalError as exc:
-        raise CommitError(f"nothing was sent to {robot}: {exc}") from None
     target = url or robot_files_url(robot, master_uri)
     req = urllib.request.Request(target, data=body, method="POST", headers={"Content-Type": "text/plain"})
     try:
@@ -158,4 +159,82 @@ def commit_extrinsics(robot: str, calib_file, *, master_uri: str | None = None, 
     return f"uploaded {path} to {target} (HTTP {code})"
 
 
-__all__ = ["CommitError", "camera_info_dict", "commit_extrinsics", "commit_intrinsics", "robot_files_url"]
+def _file_content(kind: str, robot: str, path: Path) -> dict:
+    """The content of a calibration file as the robot's key-value store holds it (validated first)."""
+    try:
+        if kind == "camera_intrinsic":
+            return calib_files.load_intrinsics(path).to_dict()
+        doc = safe_yaml.load_yaml_text(safe_yaml.read_text_file(path), str(path))
+        if not isinstance(doc, dict) or "homography" not in doc:
+            raise CommitError(f"{path} is not an extrinsic file (no homography:); nothing was sent")
+        if "version" not in doc:
+            calib_files.load_extrinsics(path)
+        return doc
+    except OSError as exc:
+        raise CommitError(f"cannot read {path} ({exc}); nothing was sent") from None
+    except CommitError:
+        raise
+    except DtscalError as exc:
+        raise CommitError(f"nothing was sent to {robot}: {exc}") from None
+
+
+def commit_dtps(link, calib_file, *, kind: str = "camera_intrinsic", timeout: float = 10.0) -> str:
+    """Store a calibration file on the robot through its key-value store over DTPS; returns a sentence.
+
+    Parameters
+    ----------
+    link : a :class:`dtscal_lib.dtps_link.DtpsRobot` (the live source's ``.dtps``, or
+        :func:`dtscal_lib.dtps_link.parse_dtps_spec` of ``ROBOT[@HOST]``)
+    calib_file : ``camera_intrinsic/<ROBOT>.yaml`` or ``camera_extrinsic/<ROBOT>.yaml`` (validated first)
+    kind : ``"camera_intrinsic"`` or ``"camera_extrinsic"``
+    timeout : seconds for the whole exchange
+
+    Raises
+    ------
+    CommitError
+        The store cannot be reached, refuses the value (an HTTP error) or holds something else afterwards;
+        the message says what to copy where by hand.
+    """
+    from .dtps_link import import_dtps, run_async
+
+    robot = _robot(link.robot)
+    path = Path(calib_file)
+    content = _file_content(kind, robot, path)
+    by_hand = _by_hand(kind, robot, path)
+    where = f"{link.kvstore_url}{'/'.join(dt.kvstore_calibration_path(kind))}/"
+    try:
+        dtps = import_dtps()[0]
+    except DtscalError as exc:
+        raise CommitError(f"{exc}; {by_hand}") from None
+
+    async def exchange():
+        cxt = await dtps.context(f"dtscal-kvstore-{robot}", urls=[link.kvstore_url])
+        try:
+            queue = cxt.navigate(*dt.kvstore_calibration_path(kind))
+            await queue.publish(dtps.RawData.cbor_from_native_object(content))
+            return (await queue.data_get()).get_as_native_object()
+        finally:
+            await cxt.aclose()
+
+    try:
+        stored = run_async(exchange(), float(timeout))
+    except TimeoutError:
+        raise CommitError(f"the robot's key-value store at {where} did not answer within {timeout:g} s; is {robot} "
+                          f"on the network? {by_hand}") from None
+    except Exception as exc:  # noqa: BLE001 (aiohttp's and dtps's errors, each said in the robot's words)
+        status = getattr(exc, "status", None)
+        if status is not None:
+            said = " ".join(str(getattr(exc, "message", "")).split())
+            raise CommitError(f"{robot} refused the calibration (HTTP {status} from {where}: {said}); nothing "
+                              f"changed on the robot. {by_hand}") from None
+        raise CommitError(f"cannot reach the robot's key-value store at {where} ({type(exc).__name__}: {exc}); "
+                          f"a robot without it (an older image) takes the file by hand: {by_hand}") from None
+    if stored != content:
+        raise CommitError(f"{robot} did not keep the calibration: {where} holds something else after COMMIT. "
+                          f"{by_hand}")
+    return (f"stored as {ROBOT_CALIBRATIONS}/{kind}/{robot}.yaml on {robot} through its key-value store "
+            f"({where})")
+
+
+__all__ = ["CommitError", "camera_info_dict", "commit_dtps", "commit_extrinsics", "commit_intrinsics",
+           "robot_files_url"]

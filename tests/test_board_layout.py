@@ -23,35 +23,10 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from drawn_ground import ACROSS, ALONG, DEFAULT_H, OUTER_X, OUTER_Y, intrinsic_file, printed_board_frame
+from drawn_ground import DUCKIEBOT_SQUARE as SQUARE
 
-# Duckietown's shipped files, value for value (duckietown.md)
-DEFAULT_P = np.array([[210.1107940673828, 0, 327.2577820024981], [0, 253.8408660888672, 239.9969353923052],
-                      [0, 0, 1]])
-DEFAULT_H = np.array([-4.89775e-05, -0.0002150858, -0.1818273, 0.00099274, 1.202336e-06, -0.3280241,
-                      -0.0004281805, -0.007185673, 1]).reshape(3, 3)
-SQUARE, OUTER_X, OUTER_Y = 0.031, 0.160, -0.124  # boards.py CalibrationBoard8by6 (x_offset, y_offset)
-ALONG, ACROSS = 6, 8  # squares away from the robot (x), across its view (y)
 REFUSED = 3
-
-
-def printed_board_frame(width: int = 640, height: int = 480, supersample: int = 4) -> np.ndarray:
-    """The rectified camera's view of the printed sheet lying at its place: grey (h, w) uint8."""
-    s = supersample
-    v, u = np.mgrid[0:height * s, 0:width * s]
-    pix = np.stack([(u + 0.5) / s - 0.5, (v + 0.5) / s - 0.5, np.ones(u.shape)], axis=-1)
-    g = pix @ DEFAULT_H.T
-    x, y = g[..., 0] / g[..., 2], g[..., 1] / g[..., 2]
-    i = np.floor((x - OUTER_X) / SQUARE)  # 0 = the row of squares nearest the robot
-    j = np.floor((y - OUTER_Y) / SQUARE)  # 0 = the column on the robot's right
-    on_board = (i >= 0) & (i < ALONG) & (j >= 0) & (j < ACROSS)
-    white = (i + j) % 2 == 0  # (0, 0), the near-right corner square, is white
-    on_paper = (np.abs(x - (OUTER_X + ALONG * SQUARE / 2)) < 0.297 / 2) & (np.abs(y) < 0.420 / 2)  # A3 sheet
-    grey = np.where(on_board, np.where(white, 235.0, 25.0), np.where(on_paper, 235.0, 110.0))
-    below = np.sign(g[..., 2]) == np.sign((DEFAULT_H @ [width / 2, height - 1.0, 1.0])[2])
-    grey = np.where(below, grey, 110.0)  # above the horizon: the room
-    grey = grey.reshape(height, s, width, s).mean(axis=(1, 3))
-    noise = np.random.default_rng(21).normal(0.0, 2.0, grey.shape)
-    return np.clip(np.rint(grey + noise), 0, 255).astype(np.uint8)
 
 
 def layout_of(image: np.ndarray) -> dict:
@@ -63,18 +38,6 @@ def layout_of(image: np.ndarray) -> dict:
         p = inv @ [OUTER_X + (i + 0.5) * SQUARE, OUTER_Y + (j + 0.5) * SQUARE, 1.0]
         out[name] = "white" if image[int(round(p[1] / p[2])), int(round(p[0] / p[2]))] > 128 else "black"
     return out
-
-
-def intrinsic_file(path: Path) -> Path:
-    """A camera without distortion whose K is the default file's rectified P: its frames are rectified."""
-    K = DEFAULT_P.ravel().tolist()
-    doc = {"image_width": 640, "image_height": 480, "camera_name": "/layoutbot/camera_node",
-           "camera_matrix": {"rows": 3, "cols": 3, "data": K}, "distortion_model": "plumb_bob",
-           "distortion_coefficients": {"rows": 1, "cols": 5, "data": [0.0] * 5},
-           "rectification_matrix": {"rows": 3, "cols": 3, "data": [1, 0, 0, 0, 1, 0, 0, 0, 1]},
-           "projection_matrix": {"rows": 3, "cols": 4, "data": [*K[0:3], 0, *K[3:6], 0, *K[6:9], 0]}}
-    path.write_text(yaml.safe_dump(doc))
-    return path
 
 
 def dtscal(*args) -> subprocess.CompletedProcess:

@@ -169,3 +169,57 @@ def test_notebook_06_calibrates_commits_and_saves_extrinsics_in_the_browser(lab,
     # the newest frame wins: images are displayed in the order the frames arrived, none goes back in time
     assert all(b >= a for a, b in zip(arrivals, arrivals[1:])), arrivals
     assert len(set(arrivals)) >= 20, arrivals  # distinct frames, not one image loaded again and again
+
+
+def test_notebook_06_reaches_a_robot_over_dtps_and_commits_to_it(lab):
+    """Notebook 06 with its one line set to a robot over DTPS (dtps-http's own server on loopback, publishing the
+    recording on Duckietown's topic): the bars fill from the robot, CALIBRATE, COMMIT to *robot over DTPS*, and
+    the robot's key-value store holds the file the notebook wrote (``tests/dtps_robot.py``)."""
+    import json
+
+    from dtps_robot import DtpsRobotServer
+
+    url, token, root = lab
+    calib_dir = root / "calibrations"
+    with DtpsRobotServer(fps=30) as robot:
+        nb = json.loads((root / NOTEBOOK.name).read_text())
+        cell = next(c for c in nb["cells"] if c.get("id") == "nb06-03")
+        text = "".join(cell["source"])
+        text = text.replace('source = str(session_dir() / "intrinsics.bag")', f'source = "{robot.spec}"', 1)
+        assert robot.spec in text
+        cell["source"] = text
+        # the robot's key-value store is on the test server, not on ROBOT's host:11411 (dtps_link.DtpsRobot)
+        kernel_env = root / "kvstore.py"
+        kernel_env.write_text(f"import os\nos.environ['DTSCAL_DTPS_KVSTORE'] = {robot.kvstore!r}\n")
+        nb["cells"].insert(1, {"cell_type": "code", "id": "kvstore", "metadata": {}, "execution_count": None,
+                               "outputs": [], "source": "%run kvstore.py"})
+        (root / NOTEBOOK.name).write_text(json.dumps(nb))
+        shots = Path(tempfile.mkdtemp(prefix="dtscal-browser-dtps-"))
+        print(f"\nscreenshots: {shots}")
+        with _playwright()() as p:
+            browser = launch_chromium(p)
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            try:
+                open_notebook(page, f"{url}/lab/tree/{NOTEBOOK.name}?token={token}")
+                page.locator(".lm-MenuBar-itemLabel", has_text="Run").first.click()
+                page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
+                page.wait_for_selector("img.dtscal-live-intrinsic", timeout=120_000)
+                page.wait_for_function("document.querySelectorAll('.dtscal-bar[data-full=\"1\"]').length >= 4",
+                                       timeout=240_000)
+                calibrate = page.locator("button:not([disabled])", has_text="CALIBRATE")
+                calibrate.wait_for(timeout=60_000)
+                calibrate.click()
+                page.wait_for_selector(".dtscal-result", timeout=120_000)
+                page.locator("button:not([disabled])", has_text="COMMIT").click()
+                page.wait_for_selector(".dtscal-ok:has-text('COMMIT to testbot: stored as')", timeout=60_000)
+                page.screenshot(path=str(shots / "committed_over_dtps.png"))
+            except Exception:
+                page.screenshot(path=str(shots / "failure.png"))
+                raise
+            finally:
+                browser.close()
+        stored = robot.stored.get("camera_intrinsic")
+    calib = calib_files.load_intrinsics(calib_dir / "camera_intrinsic" / "testbot.yaml")
+    assert stored == calib.to_dict()
+    K_true = np.asarray(datasets.load_truth()["camera"]["K"])
+    assert abs(calib.K[0, 0] / K_true[0, 0] - 1) < 0.003, calib.K

@@ -26,33 +26,18 @@ import json
 import subprocess
 import sys
 import warnings
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from drawn_ground import draw_ground
+from drawn_ground import DD24_COLS as COLS
+from drawn_ground import DD24_ROWS as ROWS
+from drawn_ground import DD24_SQUARE as SQUARE
+from drawn_ground import HOMOGRAPHY, INTRINSICS, REF, board_to_camera, reference, reference_frame
 import yaml
 
-REF = Path(__file__).resolve().parents[1] / "data" / "duckietown" / "dd24"
-HOMOGRAPHY, INTRINSICS = REF / "homography.yaml", REF / "calibration-intrinsic-dd24.yaml"
-SQUARE, COLS, ROWS = 0.017, 7, 5  # boards.py CalibrationBoardDD24: inner corners 7 x 5
 NEAR_ROW_X, RIGHT_COL_Y = 0.25 + SQUARE, -0.080 + SQUARE  # boards.py x_offset, y_offset + one square
 BOUND_MM = 1.5  # issue 21: "the kit's own homography for it matches Duckietown's reference within 0.15 cm"
-
-
-def reference():
-    F = np.array(yaml.safe_load(HOMOGRAPHY.read_text())["homography"], float).reshape(3, 3)
-    d = yaml.safe_load(INTRINSICS.read_text())
-    K = np.array(d["camera_matrix"]["data"], float).reshape(3, 3)
-    return F, K, np.array(d["distortion_coefficients"]["data"], float), (d["image_width"], d["image_height"])
-
-
-def board_to_camera(F):
-    """[r1 r2 t] of the reference: ground (board frame) -> normalized camera ray, scaled so |r1| = 1, t_z > 0."""
-    M = np.linalg.inv(F)
-    M = M / np.linalg.norm(M[:, 0])
-    return -M if M[2, 2] < 0 else M
 
 
 def pose(M):
@@ -112,20 +97,6 @@ def test_the_kit_reads_the_reference_as_duckietown_wrote_it(tmp_path):
     path.write_text(path.read_text().replace("resolution-independent", "resolution-dependent"))
     with pytest.raises(calib_files.CalibrationFileError, match="format"):
         calib_files.read_extrinsic_file(path, calib)
-
-
-def reference_frame(scale: int = 2, supersample: int = 2) -> np.ndarray:
-    """The raw portrait frame (480x640 grey) of the DD24 board seen from the reference file's camera pose."""
-    F, K, D, size = reference()
-
-    def paint(gx, gy):
-        a, c = np.floor(gx / SQUARE) + 1, np.floor(gy / SQUARE) + 1  # squares around the inner-corner grid
-        on_board = (a >= 0) & (a < COLS + 1) & (c >= 0) & (c < ROWS + 1)
-        margin = SQUARE + 0.015
-        paper = (gx > -margin) & (gx < COLS * SQUARE + 0.015) & (gy > -margin) & (gy < ROWS * SQUARE + 0.015)
-        return np.where(on_board, np.where((a + c) % 2 == 0, 235.0, 25.0), np.where(paper, 235.0, 100.0))
-
-    return draw_ground(K, D, size, np.linalg.inv(board_to_camera(F)), paint, scale=scale, supersample=supersample)
 
 
 def test_a_frame_at_the_reference_pose_calibrates_and_agrees_with_the_reference(tmp_path):

@@ -489,3 +489,36 @@ def test_every_command_the_handout_shows_works_in_the_handout(course, tmp_path):
     res = subprocess.run([".venv/bin/dtscal", "grade", "handin/Ada_Lovelace.zip"], cwd=course, env=env,
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 2 and "instructor's kit" in res.stderr and "unrecognized" not in res.stderr, res.stderr
+
+
+def test_the_handout_reaches_a_robot_over_dtps_from_notebook_06(course, tmp_path):
+    """The student's path to a robot today (README, *With a real Duckiebot*): the hand-out as start.sh installed
+    it (pip alone, no ROS asked for), notebook 06 with its one line set to ``dtps:ROBOT``, against dtps-http's own
+    server publishing the recording on Duckietown's topic (``tests/dtps_robot.py``): the calibrator receives the
+    robot's frames. The notebook runs in the hand-out's own ``.venv`` with the student's environment."""
+    from dtps_robot import DtpsRobotServer
+
+    nb = nbformat.read(str(course / "notebooks" / "06_duckiebot_camera.ipynb"), as_version=4)
+    with DtpsRobotServer(fps=30, step=5) as robot:
+        cell = next(c for c in nb.cells if c.get("id") == "nb06-03")
+        cell.source = cell.source.replace('source = str(session_dir() / "intrinsics.bag")',
+                                          f'source = "{robot.spec}"', 1)
+        assert robot.spec in cell.source
+        nb.cells.append(nbformat.v4.new_code_cell(
+            "import time\n"
+            "for _ in range(300):\n"
+            "    if calibrator.source.status.frames >= 10:\n"
+            "        break\n"
+            "    time.sleep(0.1)\n"
+            "st = calibrator.source.status\n"
+            "print('DTPS', type(calibrator.source).__name__, st.state, st.frames >= 10, st.bad)\n"
+            "calibrator.close(); extrinsics.close()"))
+        run = tmp_path / "06_dtps.ipynb"
+        nbformat.write(nb, str(run))
+        res = subprocess.run([str(course / ".venv" / "bin" / "python"), "-m", "nbconvert", "--to", "notebook",
+                              "--execute", "--ExecutePreprocessor.timeout=300", "--output", "06_done.ipynb", str(run)],
+                             cwd=tmp_path, env=_student_env(tmp_path), capture_output=True, text=True, timeout=900)
+        assert res.returncode == 0, res.stderr[-3000:]
+    done = nbformat.read(str(tmp_path / "06_done.ipynb"), as_version=4)
+    said = "".join(o.get("text", "") for o in done.cells[-1].outputs)
+    assert "DTPS DtpsLive running True {}" in said, said

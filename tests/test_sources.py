@@ -532,7 +532,7 @@ def test_missing_path(tmp_path, good_bag):
 
 def test_unknown_extension_and_fake_bag(tmp_path):
     (tmp_path / "calib.yaml").write_text("a: 1\n")
-    with pytest.raises(SourceError, match=r"pass a ROS 1 bag \(\.bag\), a video"):
+    with pytest.raises(SourceError, match=r"pass a ROS 1 bag \(\.bag\), a ROS 2 bag"):
         open_source(tmp_path / "calib.yaml")
     (tmp_path / "fake.bag").write_text("not a bag")
     with pytest.raises(SourceError, match="not a ROS 1 bag"):

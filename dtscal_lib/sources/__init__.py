@@ -7,6 +7,8 @@ One function, :func:`open_source`, turns what the user typed into an iterable of
 spec                    kind       is_stream   frames
 ======================  =========  ==========  =============================================
 ``run.bag``             bag        True        one per message of the camera image topic
+``run/`` (ROS 2 bag),   bag        True        the same, from a ROS 2 bag's folder or storage file
+``run.mcap``, ``.db3``                         (:mod:`.ros2bag`; a DD24-B records these)
 ``run.mp4`` (.avi ...)  video      True        one per decoded video frame
 ``frames/``             folder     False       one per visible file, natural order
 ``frames/*.png``        glob       False       one per matching file, natural order
@@ -20,7 +22,7 @@ and the next frame follows. A bag cut short yields every message still readable,
 last frame with reason ``"truncated"``. Only a source that cannot be opened at all raises
 :class:`~dtscal_lib.errors.SourceError`, with a message that says what to pass instead.
 
-Live cameras (a Duckiebot over ROS 1, a webcam, a stream, a recording played as a camera) are
+Live cameras (a robot over DTPS or ROS 1, a webcam, a stream, a recording played as a camera) are
 :func:`~dtscal_lib.sources.live.open_live` in :mod:`dtscal_lib.sources.live`.
 """
 
@@ -32,6 +34,7 @@ from pathlib import Path
 
 from ..errors import SourceError
 from .bag import BagSource, list_image_topics, write_compressed_image_bag
+from .ros2bag import Ros2BagSource, is_ros2_bag, write_ros2_image_bag
 from .decode import decode_image, describe_file_type
 from .files import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, StillsSource, VideoSource, folder_source, glob_source
 from .frame import Frame, FrameSource
@@ -87,16 +90,16 @@ def open_source(spec: str | os.PathLike, *, topic: str | None = None) -> FrameSo
         hint = ""
         parent = path.parent
         if parent.is_dir():
-            near = sorted(p.name for p in parent.iterdir() if p.suffix.lower() in {".bag"} | VIDEO_EXTENSIONS)[:5]
+            near = sorted(p.name for p in parent.iterdir()
+                          if p.suffix.lower() in {".bag", ".mcap", ".db3"} | VIDEO_EXTENSIONS)[:5]
             if near:
                 hint = f"; recordings in {str(parent)!r}: {', '.join(near)}"
         raise SourceError(f"source {text!r} does not exist (looked in {os.getcwd()}){hint}")
+    if is_ros2_bag(path):
+        if not path.is_dir():
+            _check_regular_file(path, text)
+        return Ros2BagSource(path, topic=topic, spec=text)
     if path.is_dir():
-        if (path / "metadata.yaml").exists():
-            raise SourceError(
-                f"{text!r} looks like a ROS 2 bag (it has metadata.yaml); this kit reads ROS 1 bags: convert it "
-                "with `rosbags-convert --dst out.bag` or record with ROS 1"
-            )
         no_topic("folder")
         return folder_source(path, text)
     _check_regular_file(path, text)
@@ -110,7 +113,8 @@ def open_source(spec: str | os.PathLike, *, topic: str | None = None) -> FrameSo
         no_topic("image file")
         return StillsSource(text, [path], "glob", path)
     raise SourceError(
-        f"do not know how to read {path.name!r} (extension {ext or 'none'}); pass a ROS 1 bag (.bag), a video "
+        f"do not know how to read {path.name!r} (extension {ext or 'none'}); pass a ROS 1 bag (.bag), a ROS 2 bag "
+        "(its folder, or a .mcap / .db3 file), a video "
         f"({', '.join(sorted(VIDEO_EXTENSIONS))}), a folder of images or a glob pattern like 'frames/*.png'"
     )
 
@@ -141,6 +145,8 @@ __all__ = [
     "Frame",
     "FrameSource",
     "BagSource",
+    "Ros2BagSource",
+    "write_ros2_image_bag",
     "VideoSource",
     "StillsSource",
     "open_source",

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import safe_write
+from .. import duckietown as dt
 from ..errors import FrameError, Reason, SourceError
 from .bagformat import MAGIC, RawConnection, RawMessage, ScanEnd, scan_bag
 from .decode import decode_image, describe_file_type, raw_image_to_bgr
@@ -30,7 +31,7 @@ COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 RAW_IMAGE = "sensor_msgs/msg/Image"
 IMAGE_TYPES = (COMPRESSED_IMAGE, RAW_IMAGE)
 #: the Duckiebot camera topic ends like this
-CAMERA_TOPIC_SUFFIX = "/image/compressed"
+CAMERA_TOPIC_SUFFIX = dt.IMAGE_SUFFIX
 
 
 def _typestore():
@@ -180,7 +181,7 @@ def choose_image_topic(info: BagInfo, topic: str | None, bag_name: str) -> str:
     if not images:
         raise SourceError(
             f"{bag_name} has no sensor_msgs/CompressedImage or sensor_msgs/Image topic (topics: {listing}); "
-            "record the camera with `rosbag record /ROBOT/camera_node/image/compressed`"
+            f"record the camera with `rosbag record {dt.ros_name(dt.IMAGE_TOPIC, 'ROBOT')}`"
         )
     camera = [t for t in images if t.endswith(CAMERA_TOPIC_SUFFIX)]
     if len(camera) == 1:
@@ -375,7 +376,7 @@ def write_compressed_image_bag(
 
     path = Path(path)
     if not isinstance(topic, str) or not topic.startswith("/") or len(topic) < 2 or " " in topic:
-        raise SourceError(f"topic must be an absolute ROS name like '/ROBOT/camera_node/image/compressed', got {topic!r}")
+        raise SourceError(f"topic must be an absolute ROS name like '{dt.ros_name(dt.IMAGE_TOPIC, 'ROBOT')}', got {topic!r}")
     if chunk_threshold < 1:
         raise SourceError(f"chunk_threshold must be a positive number of bytes, got {chunk_threshold}")
     if path.is_dir():

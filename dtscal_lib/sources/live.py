@@ -1,4 +1,4 @@
-"""Live camera sources: the newest frame of a recording, a Duckiebot over ROS 1, a webcam or a stream.
+"""Live camera sources: the newest frame of a recording, a robot over DTPS or ROS 1, a webcam or a stream.
 
 One function, :func:`open_live`, and one interface, :class:`LiveSource`, whatever the camera::
 
@@ -20,6 +20,9 @@ spec                    frames from
 ======================  =====================================================================
 ``run.bag`` (video,     the recording (:func:`~dtscal_lib.sources.open_source`), at its recorded
 folder, glob)           rate (``realtime=True``) or as fast as it decodes; ``loop=True`` repeats it
+``dtps:ROBOT``          the robot's camera over DTPS, ``ROBOT/sensor/camera/front_center/jpeg`` on
+                        its switchboard ``ROBOT.local:11911``, as ``duckietown-sdk`` reads it
+                        (``dtps:ROBOT/SENSOR@HOST:PORT``: :mod:`dtscal_lib.dtps_link`)
 ``ros:ROBOT``           ``/ROBOT/camera_node/image/compressed`` through the master of
                         ``ROS_MASTER_URI`` (``topic=`` overrides the topic)
 ``device:N``            OpenCV ``VideoCapture(N)`` (a webcam)
@@ -45,6 +48,7 @@ from typing import Self
 
 import numpy as np
 
+from .. import duckietown as dt
 from ..errors import DtscalError, FrameError, SourceError
 from .decode import decode_image
 from .frame import Frame
@@ -52,7 +56,7 @@ from .frame import Frame
 #: the Python that runs the ROS helper: Debian's, which has rospy (override with DTSCAL_ROS_PYTHON)
 ROS_PYTHON = "/usr/bin/python3"
 HELPER = Path(__file__).with_name("ros_helper.py")
-DEFAULT_MASTER = "http://localhost:11311"
+DEFAULT_MASTER = f"http://localhost:{dt.ROS_MASTER_PORT}"
 #: a camera that sends nothing for this long is reported as gone
 STALL_SECONDS = 2.0
 
@@ -384,7 +388,8 @@ def master_uri(uri: str | None = None) -> str:
     """The ROS master to use: ``uri``, else ``$ROS_MASTER_URI``, else ``http://localhost:11311``."""
     uri = (uri or os.environ.get("ROS_MASTER_URI") or DEFAULT_MASTER).strip()
     if not uri.startswith("http://"):
-        raise SourceError(f"ROS master URI {uri!r} must look like http://ROBOT.local:11311")
+        raise SourceError(f"ROS master URI {uri!r} must look like "
+                          f"http://{dt.DTPS_HOST.format(robot='ROBOT')}:{dt.ROS_MASTER_PORT}")
     return uri
 
 
@@ -438,7 +443,7 @@ class RosLive(LiveSource):
             raise SourceError("ros: needs a robot name, e.g. ros:autobot01 (or pass topic=)")
         self.robot = robot or None
         super().__init__(f"ros:{robot}")
-        self.topic = topic or f"/{robot}/camera_node/image/compressed"
+        self.topic = topic or dt.ros_name(dt.IMAGE_TOPIC, robot)
         if not self.topic.startswith("/"):
             raise SourceError(f"topic {self.topic!r} must start with '/'")
         self.master = master_uri(master)
@@ -542,6 +547,126 @@ class RosLive(LiveSource):
             pass
 
 
+# ---------------------------------------------------------------------- DTPS
+#: seconds to wait for a robot's switchboard to answer at all (a robot that is off never does)
+DTPS_CONNECT_SECONDS = 5.0
+
+
+class DtpsLive(LiveSource):
+    """A robot's camera over DTPS (a Duckiebot on ``ente``, a DD24-B), as ``duckietown-sdk`` reads it.
+
+    Subscribes to ``ROBOT/sensor/camera/SENSOR/jpeg`` on the robot's switchboard with ``dtps-http``; each
+    message is a ``duckietown_messages`` ``CompressedImage``. A message that is not one, or whose ``format``
+    is not ``jpeg``, or whose bytes do not decode, is counted in ``status.bad`` and never shown. The camera's
+    ``parameters`` (the ``CameraIntrinsicCalibration`` the robot uses now) are read when connecting:
+    :attr:`robot_intrinsics`. When no frame has come for :data:`STALL_SECONDS` the switchboard is asked
+    again: a robot that no longer answers has gone away (``ended``). ``.dtps`` is where COMMIT goes.
+    """
+
+    kind = "dtps"
+
+    def __init__(self, link, *, connect_seconds: float = DTPS_CONNECT_SECONDS):
+        from ..dtps_link import import_dtps
+
+        self.dtps = link
+        self.robot = link.robot
+        super().__init__(f"dtps:{link.robot}")
+        self.topic = link.topic
+        self.connect_seconds = float(connect_seconds)
+        import_dtps()  # fails now, with what to install
+        #: the robot's current intrinsics, as its camera publishes them (a dict of K, D, P, R,
+        #: distortion_model), or None before connecting / when it publishes none
+        self.robot_intrinsics: dict | None = None
+
+    def describe(self) -> str:
+        return f"{self.topic} on {self.dtps.url}"
+
+    def _run(self, stop: threading.Event) -> None:
+        import asyncio
+
+        asyncio.run(self._session(stop))
+
+    def _gone(self, why: str) -> str:
+        return (f"{self.dtps.robot}'s switchboard at {self.dtps.url} {why}: is the robot on and on this network "
+                f"(ping {self.dtps.host})? Then press Reconnect")
+
+    async def _session(self, stop: threading.Event) -> None:
+        import asyncio
+
+        from ..dtps_link import import_dtps
+
+        dtps, compressed_image, intrinsic_calibration = import_dtps()
+        state = {"last": None}
+
+        async def on_frame(rd) -> None:
+            state["last"] = time.monotonic()
+            try:
+                msg = compressed_image.from_rawdata(rd)
+            except Exception:  # noqa: BLE001 (duckietown_messages' DataDecodingError and pydantic's)
+                self._push_bad("not_a_compressed_image")
+                return
+            if msg.format != "jpeg":
+                self._push_bad(f"not_jpeg_{msg.format}")
+                return
+            self._push_bytes(bytes(msg.data), time.time(), f"{self.topic}#{self.status.frames}")
+
+        cxt = None
+        try:
+            try:
+                cxt = await asyncio.wait_for(dtps.context(f"dtscal-{self.dtps.robot}-{id(self)}",
+                                                          urls=[self.dtps.url]), self.connect_seconds)
+                camera = cxt.navigate(*self.dtps.camera)
+                exists = await asyncio.wait_for((camera / dt.DTPS_CAMERA_JPEG).exists(), self.connect_seconds)
+            except Exception as exc:  # noqa: BLE001 (no answer, refused, not DTPS: said in one sentence)
+                why = (f"did not answer within {self.connect_seconds:g} s" if isinstance(exc, TimeoutError)
+                       else f"cannot be reached ({type(exc).__name__})")
+                if not stop.is_set():
+                    self._set_state("error", self._gone(why))
+                return
+            if not exists:
+                if not stop.is_set():
+                    self._set_state("error", f"{self.dtps.url} answers but has no camera {self.topic}: check the "
+                                             f"robot's name and camera (dtps:ROBOT/SENSOR; Duckietown's is "
+                                             f"{dt.DTPS_CAMERA_SENSOR}), then press Reconnect")
+                return
+            with contextlib.suppress(Exception):
+                rd = await asyncio.wait_for((camera / dt.DTPS_CAMERA_PARAMETERS).data_get(), self.connect_seconds)
+                self.robot_intrinsics = intrinsic_calibration.from_rawdata(rd).model_dump(exclude={"header"})
+            sub = await (camera / dt.DTPS_CAMERA_JPEG).subscribe(on_frame)
+            self._set_state("connecting", f"subscribed to {self.describe()}, waiting for the first frame")
+            state["last"] = since = time.monotonic()
+            try:
+                while not stop.is_set():
+                    await asyncio.sleep(0.05)
+                    st = self.status
+                    if st.state != "running" and st.bad and time.monotonic() - since > STALL_SECONDS:
+                        reasons = ", ".join(f"{k}: {v}" for k, v in sorted(st.bad.items()))
+                        self._set_state("error", f"{st.frames} messages came from {self.describe()} but none is a "
+                                                 f"JPEG frame ({reasons}); the kit reads the camera's JPEG "
+                                                 "stream: check the robot's camera driver, then press Reconnect")
+                        return
+                    if time.monotonic() - state["last"] < STALL_SECONDS:
+                        continue
+                    try:  # silent for a while: is the robot still there?
+                        await asyncio.wait_for(cxt.list(), 1.0)
+                    except Exception:  # noqa: BLE001
+                        if not stop.is_set():
+                            self._set_state("ended", self._gone(f"stopped answering after {self.status.frames} "
+                                                                "frames"))
+                        return
+                    state["last"] = time.monotonic()
+                    if self.status.state != "running":
+                        self._set_state("connecting", f"{self.dtps.url} answers but {self.topic} sends no frame: "
+                                                      "is the robot's camera driver running?")
+            finally:
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(sub.unsubscribe(), 1.0)
+        finally:
+            if cxt is not None:
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(cxt.aclose(), 2.0)
+
+
 # ---------------------------------------------------------------------- for the command line
 class LiveFrames:
     """A live source as a finite iterable of frames, for the headless pipeline.
@@ -555,12 +680,14 @@ class LiveFrames:
     kind = "live"
 
     def __init__(self, spec: str, *, topic: str | None = None, max_seconds: float | None = None,
-                 done=None, master_uri: str | None = None, say=None):
+                 done=None, master_uri: str | None = None, say=None, kvstore: str | None = None):
         #: called with each new sentence on why no frame arrives yet (default: a line on stderr)
         self.say = say if say is not None else _say_on_stderr
         self.spec = spec
-        self.live = open_live(spec, topic=topic, master_uri=master_uri)
+        self.live = open_live(spec, topic=topic, master_uri=master_uri, kvstore=kvstore)
         self.topic = self.live.topic
+        #: where COMMIT goes over DTPS (a ``dtps:`` source), else None
+        self.dtps = getattr(self.live, "dtps", None)
         self.max_seconds = max_seconds
         self.done = done or (lambda: False)
         self.stopped = ""
@@ -611,25 +738,26 @@ def _say_on_stderr(message: str) -> None:
 
 # ---------------------------------------------------------------------- the one entry point
 def is_live_spec(spec) -> bool:
-    """True for ``ros:...``, ``device:N`` and URLs: sources that only :func:`open_live` opens."""
+    """True for ``dtps:...``, ``ros:...``, ``device:N`` and URLs: sources that only :func:`open_live` opens."""
     if not isinstance(spec, str):
         return False
     s = spec.strip().lower()
-    return s.startswith(("ros:", "device:", "http://", "https://", "rtsp://", "rtsps://"))
+    return s.startswith(("dtps:", "ros:", "device:", "http://", "https://", "rtsp://", "rtsps://"))
 
 
 def open_live(spec: str, *, realtime: bool = True, topic: str | None = None, loop: bool = False,
-              master_uri: str | None = None) -> LiveSource:
+              master_uri: str | None = None, kvstore: str | None = None) -> LiveSource:
     """Open a camera or a recording as a :class:`LiveSource` (not started: call ``.start()`` or use ``with``).
 
     Parameters
     ----------
-    spec : a recording (``.bag``, video, folder, glob), ``"ros:ROBOT"``, ``"device:N"`` or an
+    spec : a recording (``.bag``, video, folder, glob), ``"dtps:ROBOT"``, ``"ros:ROBOT"``, ``"device:N"`` or an
         ``http(s)://`` / ``rtsp://`` stream URL
     realtime : recordings only: play at the recorded rate (True) or as fast as possible
     topic : the bag topic or ROS topic (default ``/ROBOT/camera_node/image/compressed``)
     loop : recordings only: start over at the end instead of ending
     master_uri : ROS only: the master (default ``$ROS_MASTER_URI``, else ``http://localhost:11311``)
+    kvstore : DTPS only: the robot's key-value store for COMMIT (default ``http://HOST:11411/``)
 
     Raises
     ------
@@ -646,6 +774,13 @@ def open_live(spec: str, *, realtime: bool = True, topic: str | None = None, loo
                           f"got {type(spec).__name__}")
     text = os.fspath(spec).strip()
     low = text.lower()
+    if low.startswith("dtps:"):
+        from ..dtps_link import parse_dtps_spec
+
+        if topic is not None:
+            raise SourceError(f"topic= applies to bags and ROS, not to {text!r}; name the camera as "
+                              "dtps:ROBOT/SENSOR")
+        return DtpsLive(parse_dtps_spec(text[5:], kvstore=kvstore))
     if low.startswith("ros:"):
         robot = text[4:].strip().strip("/")
         from ..calib_files import is_robot_name
@@ -660,5 +795,5 @@ def open_live(spec: str, *, realtime: bool = True, topic: str | None = None, loo
     return RecordingLive(text, realtime=realtime, topic=topic, loop=loop)
 
 
-__all__ = ["CaptureLive", "LiveFrames", "LiveSource", "LiveStatus", "RecordingLive", "RosLive", "is_live_spec",
+__all__ = ["CaptureLive", "DtpsLive", "LiveFrames", "LiveSource", "LiveStatus", "RecordingLive", "RosLive", "is_live_spec",
            "master_uri", "open_live", "ros_python", "run_ros_helper"]

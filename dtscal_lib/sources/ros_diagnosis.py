@@ -25,10 +25,12 @@ import threading
 import xmlrpc.client
 from urllib.parse import urlsplit
 
+from .. import duckietown as dt
+
 RESOLVE_S = 2.0
 CONNECT_S = 3.0
 RECONNECT = "then press Reconnect"
-_CAMERA_TOPIC = re.compile(r"^/([^/]+)/camera_node/image/compressed$")
+_CAMERA_TOPIC = re.compile("^" + re.escape(dt.IMAGE_TOPIC).replace(re.escape("{robot}"), "([^/]+)") + "$")
 
 
 def _resolve(host: str, port: int) -> tuple[list | None, str]:
@@ -63,11 +65,12 @@ def _master(uri: str):
 def master_problem(uri: str, *, uri_was_set: bool = True) -> str | None:
     """Why the ROS master at ``uri`` cannot be used, or None when it answers as a master."""
     parts = urlsplit(uri)
-    host, port = parts.hostname or "", parts.port or 11311
+    host, port = parts.hostname or "", parts.port or dt.ROS_MASTER_PORT
     if not uri_was_set:
         where = "ROS_MASTER_URI is not set and no ROS master runs on this computer"
         fix = ("set it to your robot's master before starting JupyterLab or the command "
-               "(export ROS_MASTER_URI=http://ROBOT.local:11311, or pass master_uri= / --master-uri), " + RECONNECT)
+               f"(export ROS_MASTER_URI=http://ROBOT.local:{dt.ROS_MASTER_PORT}, or pass master_uri= / --master-uri), "
+               + RECONNECT)
     else:
         where, fix = None, None
     addrs, why = _resolve(host, port)
@@ -86,7 +89,8 @@ def master_problem(uri: str, *, uri_was_set: bool = True) -> str | None:
         if where:
             return f"{where}: {fix}"
         return (f"nothing listens on port {port} of {host} (ROS_MASTER_URI={uri}): the computer is there but no "
-                f"ROS master runs on it; start the robot's ROS (or correct the port; ROS uses 11311), " + RECONNECT)
+                f"ROS master runs on it; start the robot's ROS (or correct the port; ROS uses {dt.ROS_MASTER_PORT}), "
+                + RECONNECT)
     except OSError as exc:
         if where:
             return f"{where}: {fix}"
@@ -97,7 +101,7 @@ def master_problem(uri: str, *, uri_was_set: bool = True) -> str | None:
         code, msg, _state = _master(uri).getSystemState("/dtscal_probe")
     except (OSError, xmlrpc.client.Error) as exc:
         return (f"port {port} of {host} answers but not as a ROS master ({type(exc).__name__}; "
-                f"ROS_MASTER_URI={uri}): correct the port (ROS uses 11311), " + RECONNECT)
+                f"ROS_MASTER_URI={uri}): correct the port (ROS uses {dt.ROS_MASTER_PORT}), " + RECONNECT)
     if code != 1:
         return f"the ROS master at {uri} refused a question ({msg!r}): restart the robot's ROS, " + RECONNECT
     return None

@@ -165,8 +165,14 @@ finish (a full disk, a read-only notebook), it says what to do and changes nothi
 
 ## With a real Duckiebot
 
-Notebook 06 runs on the recording without a robot. To calibrate a real Duckiebot you need ROS 1 on this
-computer (Debian or Ubuntu) and the robot on the same network:
+Notebook 06 runs on the recording without a robot. To calibrate a real robot, a Duckiebot on Duckietown's
+`ente` release or a DD24-B Duckiedrone, put this computer on the robot's network (`ping ROBOT.local` must
+answer) and use `dtps:ROBOT` as the source in notebook 06 (your robot's name, e.g. `dtps:autobot01`). That
+is all: the kit reaches the robot's camera over DTPS, Duckietown's own link, as Duckietown's Python SDK does,
+with what `bash start.sh` installed, on Linux, macOS or Windows. COMMIT stores the calibration on the robot.
+
+A course that runs ROS 1 instead (older Duckiebots, a DD24 on its legacy ROS 1 stack) needs ROS 1 on this
+computer (Debian or Ubuntu):
 
 ```bash
 sudo bash scripts/install-ros.sh
@@ -175,8 +181,8 @@ export ROS_IP=$(hostname -I | awk '{print $1}')     # this computer's address on
 bash start.sh
 ```
 
-and use `ros:ROBOT` as the source in notebook 06. If the robot does not answer, the status line says
-why and what to do. On macOS or Windows, and for everything a TA sets up, see `docs/ta.md`.
+and `ros:ROBOT` as the source. If the robot does not answer, the status line says why and what to do. For
+everything a TA sets up, see `docs/ta.md`.
 """.replace("{git_handin}", GIT_HANDIN)
 #: what ``bash start.sh --help`` prints, at once (before any install), and every option of it works in the hand-out
 START_HELP = """usage: bash start.sh [--no-browser] [--port PORT] [--ip IP] [--update] [--setup-only]

@@ -5,6 +5,14 @@ from __future__ import annotations
 from ..errors import DtscalError
 
 
+def dtps_link_of(source, robot: str):
+    """Where COMMIT goes over DTPS: the ``dtps:`` source's robot, else ``robot`` at ``ROBOT.local``."""
+    from ..dtps_link import parse_dtps_spec
+
+    link = getattr(source, "dtps", None)
+    return link if link is not None else parse_dtps_spec(robot or "")
+
+
 class LoopDriver:
     """A driver with a frame loop (``self.loop``) on a source (``self.spec``); subclasses define ``close``."""
 

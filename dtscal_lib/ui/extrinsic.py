@@ -80,8 +80,10 @@ class LiveExtrinsics(ExtrinsicDriver):
         self.format = w.Dropdown(options=[("classic (homography: 9 values)", "classic"),
                                           ('version "2" (resolution-independent)', "2")],
                                  value="classic", description="format")
-        self.target = w.Dropdown(options=[("calibration folder", "folder"), ("folder and robot (upload)", "robot")],
-                                 value="robot" if self.spec.startswith("ros:") else "folder", description="save to")
+        self.target = w.Dropdown(options=[("calibration folder", "folder"), ("folder and robot over DTPS", "dtps"),
+                                          ("folder and robot (file upload)", "robot")],
+                                 value="dtps" if self.spec.startswith("dtps:") else "robot"
+                                 if self.spec.startswith("ros:") else "folder", description="save to")
         self.keep_anyway = w.Checkbox(value=False, description="keep anyway (expert)", indent=False)
         self.message = w.HTML("")
         for b, fn in ((self.save_button, self.save), (self.reset_button, self.reset_best),

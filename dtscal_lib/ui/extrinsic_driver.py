@@ -22,9 +22,10 @@ from .. import calib_files
 from ..boards import DUCKIETOWN_BOARD, Board, ground_points
 from ..camera import CameraModel, rectify_image
 from ..errors import DtscalError, ImplausibleCalibrationError, Reason
+from ..ground import UPSIDE_DOWN_SAID
 from ..session import ExtrinsicSession, robot_name
 from ..sources.live import open_live
-from .driver import LoopDriver
+from .driver import LoopDriver, dtps_link_of
 from .frameloop import FrameLoop
 from .render import rectification_maps_fast
 
@@ -179,7 +180,8 @@ class ExtrinsicDriver(LoopDriver):
     # ------------------------------------------------------------------ SAVE, RESET, RECONNECT
     def save_to(self, folder: str, *, keep_anyway: bool, fmt: str, target: str) -> tuple[str, str]:
         """SAVE through the session's gate: the best homography as ``camera_extrinsic/<ROBOT>.yaml`` in the
-        folder (``fmt`` classic or ``"2"``), then (``target`` ``"robot"``) the upload to the robot."""
+        folder (``fmt`` classic or ``"2"``), then (``target`` ``"robot"``) the upload to the robot's file server or
+        (``"dtps"``) its key-value store."""
         with self._lock:
             best, frame = self.best, self.best_frame
         if best is None:
@@ -187,11 +189,15 @@ class ExtrinsicDriver(LoopDriver):
         try:
             path = self.session.write(folder, keep_anyway=keep_anyway, fmt=fmt)
             text = f"SAVE: wrote {path} (best fit, frame {frame}, mean error {np.mean(best.residual_mm):.2f} mm)"
+            if best.upside_down:
+                text += f"; {UPSIDE_DOWN_SAID}"
             if self.session.doubts:
                 return (text + "; kept against the kit's doubts: " + "; ".join(map(str, self.session.doubts))
                         + ". It is not sent to the robot.", "error")
-            if target == "robot":
-                text += "; " + self.session.commit(master_uri=getattr(self.source, "master", None), fmt=fmt)
+            if target in ("robot", "dtps"):
+                text += "; " + self.session.commit(master_uri=getattr(self.source, "master", None), fmt=fmt,
+                                                   dtps=dtps_link_of(self.source, self.robot)
+                                                   if target == "dtps" else None)
         except ImplausibleCalibrationError as exc:
             doubts = "".join(f"<br>- {d}" for d in exc.doubts)
             return (f"SAVE refused: the kit does not believe this homography, nothing was written:{doubts}"

@@ -27,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+from .. import duckietown as dt
 from ..boards import DUCKIETOWN_BOARD, Board
 from ..camera import DIST_MODELS
 from ..coverage import CoverageTracker
@@ -81,10 +82,11 @@ class LiveCalibrator(IntrinsicDriver):
                                               "the robot's file (never sent to the robot)")
         self.save_button = w.Button(description="SAVE", disabled=False)
         self.reconnect_button = w.Button(description="RECONNECT", icon="refresh")
-        ros = self.spec.startswith("ros:")
-        self.commit_target = w.Dropdown(options=[("robot over ROS (set_camera_info)", "ros"),
+        robot_link = "dtps" if self.spec.startswith("dtps:") else "ros" if self.spec.startswith("ros:") else "folder"
+        self.commit_target = w.Dropdown(options=[("robot over DTPS (its key-value store)", "dtps"),
+                                                 (f"robot over ROS ({dt.SET_CAMERA_INFO})", "ros"),
                                                  ("calibration folder", "folder")],
-                                        value="ros" if ros else "folder", description="commit to")
+                                        value=robot_link, description="commit to")
         self.robot_text = w.Text(value=self.robot, description="robot")
         # the lens model of the next CALIBRATE (ROS's calibrator: plumb_bob, rational_polynomial, equidistant)
         self.model_choice = w.Dropdown(options=list(DIST_MODELS), value=model, description="lens model")
@@ -239,7 +241,8 @@ class LiveCalibrator(IntrinsicDriver):
 
     def commit(self) -> str:
         """Write ``camera_intrinsic/<ROBOT>.yaml`` into the calibration folder and, with the
-        target "robot over ROS", send it to ``/<ROBOT>/camera_node/set_camera_info``.
+        target "robot over DTPS", store it on the robot through its key-value store; with "robot over ROS",
+        send it to ``/<ROBOT>/camera_node/set_camera_info``.
 
         The session's gate comes first, as for ``dtscal calibrate-intrinsics``: a calibration the kit
         does not believe is refused (nothing written, nothing sent); with "keep anyway" it is written as

@@ -27,7 +27,7 @@ from ..sources.live import open_live
 from . import render
 from .archive import load_session, save_session
 from .background import BackgroundCalibration, PreviewMaps
-from .driver import LoopDriver
+from .driver import LoopDriver, dtps_link_of
 from .frameloop import FrameLoop
 
 #: what the tool says of its frames when the source stops (every sample is kept)
@@ -224,7 +224,8 @@ class IntrinsicDriver(LoopDriver):
     # ------------------------------------------------------------------ COMMIT, SAVE, LOAD: (message, kind)
     def commit_to(self, folder: str, *, keep_anyway: bool, target: str) -> tuple[str, str]:
         """COMMIT through the session's gate: the folder's ``camera_intrinsic/<ROBOT>.yaml``, then (``target``
-        ``"ros"``) the robot's ``set_camera_info``. Refused, kept anyway or failed: the message says so."""
+        ``"dtps"``) the robot's key-value store or (``"ros"``) its ``set_camera_info``. Refused, kept anyway or
+        failed: the message says so."""
         if self.result is None:
             return "nothing to commit yet: CALIBRATE first", "error"
         try:
@@ -234,7 +235,8 @@ class IntrinsicDriver(LoopDriver):
                         + "; ".join(map(str, self.session.doubts)) + ". It is not sent to the robot.", "error")
             if target == "folder":
                 return f"COMMIT: wrote {path} (the previous file, if any, is kept as .bak)", "ok"
-            answer = self.session.commit(master_uri=getattr(self.source, "master", None))
+            answer = self.session.commit(master_uri=getattr(self.source, "master", None),
+                                         dtps=dtps_link_of(self.source, self.robot) if target == "dtps" else None)
             return f"COMMIT to {self.robot}: {answer} (local copy: {path})", "ok"
         except ImplausibleCalibrationError as exc:
             doubts = "".join(f"<br>- {d}" for d in exc.doubts)
