@@ -544,30 +544,36 @@ def mode() -> str:
 
 
 def barriers() -> dict:
-    """What holds around a submission on this machine, in words (results.json, command line)."""
+    """What holds around a submission on this machine, in words (results.json, command line):
+    only barriers that hold; without bubblewrap, ``not_held`` names those missing."""
     m = mode()
-    sec = ("seccomp: no exec, no ptrace/mount/unshare/bpf/keyctl/memfd_create/io_uring/sockets; the student's "
-           "code can start no process or thread and signal only itself" if seccomp.supported()
-           else "no seccomp filter (no system-call table for this architecture)")
-    out = {"mode": m, "seccomp": sec,
+    sec = ("seccomp: no exec, no ptrace/mount/unshare/bpf/keyctl/memfd_create/io_uring/sockets, no fcntl/ioctl "
+           "that names a process to signal; the student's code can start no process or thread and signal only "
+           "itself" if seccomp.supported() else None)
+    out = {"mode": m, **({"seccomp": sec} if sec else {}),
            "memory": "address space capped per process (--mem); the student's code runs in one process that "
                      "can start no other, so the cap bounds the submission",
            "answers": "values only, over a capped length-prefixed pipe; judged outside the sandbox"}
     if m == "bubblewrap":
-        out.update(filesystem="bubblewrap: only the interpreter, numpy and the kit's allowed modules, read-only; "
-                              f"a private {TMPFS_MB} MB tmpfs; no kit checkout, grading material, home, /etc or "
-                              "other submissions",
+        out.update(filesystem="bubblewrap: only its manifest (the interpreter, its standard library, numpy, the "
+                              "kit's allowed modules and the libraries these load), read-only; a private "
+                              f"{TMPFS_MB} MB tmpfs; no kit checkout, grading material, home, /etc or other "
+                              "submissions",
                    network="network namespace: no network, no host socket",
                    processes="PID namespace: the submission sees and signals only its own processes, all die "
                              "with it",
-                   user="user namespace: a uid per concurrent submission (lock files shared by all graders)")
-    else:
-        why = bwrap_available()[1] if MODE is None else "bubblewrap turned off"
-        out.update(filesystem=f"NO filesystem barrier ({why}): the student's code reads what the grader's user "
-                              "can read; OpenCV and the kit's solvers are refused only by the import rule",
-                   network="no network namespace: sockets refused by seccomp",
-                   processes="no PID namespace: the student's code can start no process (seccomp)",
-                   user="the grader's own user")
+                   user="user namespace: a uid per concurrent submission (lock files of the grader's own user)")
+        return out
+    why = bwrap_available()[1] if MODE is None else "bubblewrap turned off"
+    if sec:
+        out.update(network="sockets refused by seccomp",
+                   processes="a session and process group of its own; seccomp: no new process, signals only to "
+                             "itself; the grader's process is undumpable (no /proc/PID/mem of it)")
+    out["not_held"] = [f"filesystem ({why}): the student's code reads and writes what the grader's user can, the "
+                       "hidden cases and the other submissions included; OpenCV and the kit's solvers are refused "
+                       "only by the import rule", "PID namespace", "network namespace", "user namespace"]
+    if not sec:
+        out["not_held"].append("seccomp (no system-call table for this architecture): processes, signals, sockets")
     return out
 
 
@@ -647,6 +653,8 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
     jobs = [_as_job(c) for c in checks]
     run = SandboxRun()
     m = mode()
+    if m != "bubblewrap":
+        _undumpable()
     run.notes.update(barriers())
     run.notes["pid_namespace"] = m == "bubblewrap"
     run.notes["survivors"] = 0
@@ -672,6 +680,15 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
         exc.run = run
         raise exc
     return run
+
+
+def _undumpable() -> None:
+    """Without bubblewrap the student's code runs as the grader's user: make the grader's process
+    undumpable (``PR_SET_DUMPABLE`` 0), so that no process of that user opens its ``/proc/PID/mem``
+    or ``fd/`` (proc(5); the kernel's ptrace access check)."""
+    import ctypes
+
+    ctypes.CDLL(None, use_errno=True).prctl(4, 0, 0, 0, 0)
 
 
 def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
