@@ -231,14 +231,14 @@ class _Decoder:
         return None, ""
 
 
-def last_answer(data: bytes) -> bytes | None:
+def last_answer(data: bytes) -> memoryview | None:
     """The answer frame that closes a worker's output (length + mark at the very end), or None."""
     if len(data) < 16 or data[-8:] != ANSWER_MARK:
         return None
     (n,) = struct.unpack(">Q", data[-16:-8])
     if n > len(data) - 16:
         return None
-    return data[len(data) - 16 - n: len(data) - 16]
+    return memoryview(data)[len(data) - 16 - n: len(data) - 16]
 
 
 def decode_answers(data: bytes) -> list[Call] | None:
@@ -625,8 +625,8 @@ def _as_job(c) -> CheckJob:
                     substitute=list(c.get("substitute", ())))
 
 
-def run_calls(statements: list[tuple[str, int]], checks: list, *,
-              mem_mb: int = MEM_MB, output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None) -> SandboxRun:
+def run_calls(statements: list[tuple[str, int]], checks: list, *, mem_mb: int = MEM_MB,
+              output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None, judge=None) -> SandboxRun:
     """Run ``checks`` (:class:`CheckJob`, or dicts with the same keys) on the submission.
 
     Parameters
@@ -634,6 +634,9 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
     statements : the submission's import/def statements ``(source, first line)``
     checks : inputs only; the answers are judged by the caller
     workdir_files : ``{name: bytes}`` written into the working folder
+    judge : ``judge(check id, CheckRun)``, called as each check's answer arrives; the answer is
+        then dropped (``run.checks`` keeps the check's id with no values), so the grader holds
+        one check's answers at a time, never a whole submission's
 
     Returns
     -------
@@ -670,7 +673,7 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
                          cv2_deny=sorted(CV2_DENY), kit_allowed=list(KIT_ALLOWED),
                          kit_dir="/sandbox/harness/kit" if m == "bubblewrap" else str(sandbox_lib() / "kit"), mode=m)
         try:
-            _one_sandbox(job, run, skip)
+            _one_sandbox(job, run, skip, judge)
         except GraderError as exc:
             errors.append(str(exc))
             time.sleep(0.2 * (attempt + 1))
@@ -691,7 +694,7 @@ def _undumpable() -> None:
     ctypes.CDLL(None, use_errno=True).prctl(4, 0, 0, 0, 0)
 
 
-def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
+def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int], judge=None) -> None:
     m = job.mode
     slot, slot_fd = _SLOTS.take()
     workdir = None
@@ -724,7 +727,7 @@ def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
         drainer = threading.Thread(target=_drain, args=(proc.stderr, 8000, err), daemon=True)
         drainer.start()
         try:
-            _converse(proc, job, run, skip, err)
+            _converse(proc, job, run, skip, err, judge)
         finally:
             procs = _descendants(proc.pid)  # the sandbox's processes, looked for again once it is gone
             try:
@@ -796,7 +799,7 @@ def _drain(stream, keep: int, sink: list) -> None:
         size += len(chunk)
 
 
-def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list) -> None:
+def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list, judge=None) -> None:
     data = pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL)
     try:
         proc.stdin.write(struct.pack(">Q", len(data)) + data)
@@ -840,10 +843,16 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
             status = str(header.get("status", ""))[:40]
             answer = last_answer(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
             calls = decode_answers(answer) if answer is not None else None
+            del answer, blobs, frame
             if calls is None:
-                run.checks[cid] = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb))
+                cr = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb))
             else:
-                run.checks[cid] = CheckRun(calls=calls)
+                cr = CheckRun(calls=calls)
+            del calls
+            if judge is not None:  # judged now, then dropped: one check's answers at a time
+                judge(cid, cr)
+                cr = CheckRun(failure=cr.failure)
+            run.checks[cid] = cr
             nxt = next((x for x in job.checks if x.id not in run.checks), None)
             deadline = time.monotonic() + (nxt.wall + 10 if nxt else 10)
         elif ev == "finished":
@@ -870,11 +879,12 @@ def _next_frame(fd: int, buf: bytearray, deadline: float):
                     return None
                 need = 4 + n + sum(sizes)
         if need is not None and len(buf) >= need:
-            blobs, pos = [], 4 + n
-            for s in sizes:
-                blobs.append(bytes(buf[pos: pos + s]))
-                pos += s
+            whole = bytes(buf[:need]) if len(buf) > need else bytes(buf)  # the frame, copied once
             del buf[:need]
+            view, blobs, pos = memoryview(whole), [], 4 + n
+            for s in sizes:
+                blobs.append(view[pos: pos + s])
+                pos += s
             return header, blobs
         left = deadline - time.monotonic()
         if left <= 0 or not select.select([fd], [], [], left)[0]:
