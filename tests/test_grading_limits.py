@@ -4,6 +4,7 @@ and the grader's memory, which follows one check's answers, not the sum of a sub
 from __future__ import annotations
 
 import json
+import os
 
 from dtscal_lib.grading.grade import grade_file
 from dtscal_lib.grading.loader import MAX_CELLS
@@ -29,3 +30,39 @@ def test_a_notebook_with_too_many_cells_is_refused_with_the_bound(tmp_path):
     res = grade_file(_notebook(tmp_path / "ok" / "02_homography.ipynb", MAX_CELLS) if (tmp_path / "ok").mkdir()
                      is None else None, m, "02_homography")
     assert "cells, more than" not in text(res)
+
+
+def test_uid_slots_lie_where_no_other_user_can_write(tmp_path, monkeypatch):
+    """Another local user who creates the temp-folder place first (world-writable, full of slot
+    files) holds nothing of this grader's: its slots lie in a folder of its own user's, 0700."""
+    import tempfile
+
+    from dtscal_lib.grading import sandbox
+    from unprivileged import run_unprivileged, shared_tmp
+
+    d = sandbox._Slots.directory()
+    st = os.lstat(d)
+    assert st.st_uid == os.getuid() and not st.st_mode & 0o077, oct(st.st_mode)
+    home = tmp_path / "not-a-folder"
+    home.write_text("")
+    with shared_tmp() as tmp:
+        os.chmod(tmp, 0o1777)  # a temp folder: everyone writes, the sticky bit keeps each one's own
+        monkeypatch.delenv("XDG_RUNTIME_DIR", raising=False)
+        monkeypatch.setenv("HOME", str(home))  # no ~/.cache here: the temp folder is next
+        monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+        squatted = tmp / f"dtscal-grade-slots-{os.getuid()}"
+
+        def squat():
+            squatted.mkdir()
+            os.chmod(squatted, 0o777)
+            for k in range(64):
+                (squatted / f"slot{k}").touch()
+            return "squatted"
+
+        ok, got = run_unprivileged(squat)
+        assert ok, got
+        d = sandbox._Slots.directory()
+        assert d != squatted and os.lstat(d).st_uid == os.getuid() and not os.lstat(d).st_mode & 0o077
+        run = sandbox.run_calls([("def f():\n    return 1.0", 1)],
+                                [sandbox.CheckJob(id=0, calls=[("f", ())], wall=10.0, cpu=5)])
+        assert float(run.checks[0].calls[0].value) == 1.0

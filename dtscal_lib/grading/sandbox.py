@@ -44,6 +44,7 @@ import pickle
 import select
 import shutil
 import signal
+import stat
 import struct
 import subprocess
 import sys
@@ -582,22 +583,44 @@ def barriers() -> dict:
 
 class _Slots:
     """A uid slot per concurrent submission, on this machine: a lock file per slot (flock),
-    so two graders started at once never run submissions under the same uid."""
+    so two graders of one user started at once never run submissions under the same uid.
 
-    DIR = Path(tempfile.gettempdir()) / "dtscal-grade-slots"
+    The lock files lie in a folder only the grader's user can write (:meth:`directory`): in a
+    folder that others can write (the world-writable temp folder), any local user could create and
+    hold every slot file first, and every student of the grader would be "grader error"."""
 
     def __init__(self):
         self.lock = threading.Lock()
 
+    @staticmethod
+    def directory() -> Path:
+        """``$XDG_RUNTIME_DIR/dtscal-grade-slots``, else ``~/.cache/dtscal-grade-slots``, else
+        ``$TMPDIR/dtscal-grade-slots-UID``: the first that is a real folder of this user's that no
+        one else may write (0700); else a private folder of this grader alone."""
+        uid = os.getuid()
+        places = [Path(os.environ["XDG_RUNTIME_DIR"]) / "dtscal-grade-slots"] if os.environ.get(
+            "XDG_RUNTIME_DIR") else []
+        places += [Path(os.path.expanduser("~")) / ".cache" / "dtscal-grade-slots",
+                   Path(tempfile.gettempdir()) / f"dtscal-grade-slots-{uid}"]
+        for d in places:
+            try:
+                d.mkdir(mode=0o700, parents=True, exist_ok=True)
+                st = os.lstat(d)
+            except OSError:
+                continue
+            if stat.S_ISDIR(st.st_mode) and st.st_uid == uid and not st.st_mode & 0o022:
+                return d
+        with _LIB_LOCK:
+            if "slots" not in _LIB:
+                _LIB["slots"] = Path(tempfile.mkdtemp(prefix="dtscal-grade-slots-"))
+                atexit.register(shutil.rmtree, _LIB["slots"], True)
+            return _LIB["slots"]
+
     def take(self) -> tuple[int, int]:
-        try:
-            self.DIR.mkdir(mode=0o1777, exist_ok=True)
-            os.chmod(self.DIR, 0o1777)
-        except OSError:
-            pass
+        d = self.directory()
         for k in range(4096):
             try:
-                fd = os.open(self.DIR / f"slot{k}-uid{os.getuid()}", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+                fd = os.open(d / f"slot{k}", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
             except OSError:
                 continue
             try:
