@@ -23,7 +23,9 @@ check still runs in its own process with its own limits.
 
 The answers come back as one length-prefixed frame per check over the harness's stdout, with
 hard caps on header size, number of arrays and bytes *before* anything is decoded; each array is
-a plain ``.npy`` read with ``allow_pickle=False``, each at most once. The sandbox writes no file
+a plain ``.npy`` of numbers (an object array, i.e. a pickle, is refused unread: :func:`_npy`), each
+at most once, over the frame's own bytes; each check's answers are judged and dropped before the
+next check's arrive. The sandbox writes no file
 the grader reads. Only values come back, never verdicts: the grader compares them with the truth
 it alone holds (:mod:`.checks`).
 
@@ -202,6 +204,26 @@ def split_frame(data: bytes, offset: int = 0) -> tuple[dict, list[memoryview], i
     return header, blobs, pos
 
 
+def _npy(blob: memoryview) -> np.ndarray:
+    """A plain ``.npy`` (numpy's format 1.0 or 2.0) as an array over ``blob``'s own bytes, no copy:
+    numbers only; an object array (a pickle, which would run code here) is refused, never loaded."""
+    head = io.BytesIO(bytes(blob[:min(len(blob), 65536 + 16)]))
+    version = np.lib.format.read_magic(head)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(head)
+    elif version == (2, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(head)
+    else:
+        raise ValueError(f"npy format {version}")
+    if dtype.hasobject or dtype.kind not in "biuf":
+        raise ValueError("not an array of numbers (a pickle?)")
+    count = int(np.prod(shape, dtype=np.int64))
+    if head.tell() + count * dtype.itemsize != len(blob):
+        raise ValueError("size does not match the header")
+    arr = np.frombuffer(blob, dtype=dtype, count=count, offset=head.tell())
+    return arr.reshape(shape, order="F" if fortran else "C")
+
+
 class _Decoder:
     """Arrays of one answer frame: each blob decoded at most once (no fan-out of one array)."""
 
@@ -223,7 +245,7 @@ class _Decoder:
                 return None, "unreadable answer"
             self.used.add(i)
             try:
-                arr = np.load(io.BytesIO(self.blobs[i]), allow_pickle=False)
+                arr = _npy(self.blobs[i])
             except Exception:  # noqa: BLE001
                 return None, "unreadable answer"
             if type(arr) is not np.ndarray or arr.dtype.kind not in "biuf":
@@ -835,7 +857,7 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
     buf = bytearray()
     # the harness answers "ready" within load_budget (it skips statements that load too slowly)
     deadline = time.monotonic() + load_budget(job.load_wall) + LOAD_MARGIN_S
-    hello = False
+    state = {"hello": False, "deadline": None}
     while True:
         frame = _next_frame(fd, buf, deadline)
         if frame is None:
@@ -844,46 +866,60 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
             raise GraderError(f"the sandbox {why} (exit status {proc.returncode}): "
                               + b"".join(err).decode(errors="replace")[-1500:].strip())
         header, blobs = frame
-        ev = header.get("event")
-        if ev == "hello":
-            hello = True
-            run.notes.update({str(k): str(v)[:300] for k, v in dict(header.get("notes", {})).items()})
-        elif not hello:
+        del frame
+        try:  # a large answer's turn (see BIG_FRAME_BYTES) ends with its frame, whatever happens
+            if _on_frame(header, blobs, job, run, skip, judge, by_id, state):
+                return
+        finally:
+            del blobs
+            if header.get("_big"):
+                _BIG_FRAME.release()
+        deadline = state["deadline"] or deadline
+        state["deadline"] = None
+
+
+def _on_frame(header: dict, blobs: list, job: SandboxJob, run: SandboxRun, skip: list[int], judge, by_id: dict,
+              state: dict) -> bool:
+    """Take one frame of the harness; True once it has finished. A new deadline goes to ``state``."""
+    ev = header.get("event")
+    if ev == "hello":
+        state["hello"] = True
+        run.notes.update({str(k): str(v)[:300] for k, v in dict(header.get("notes", {})).items()})
+    elif not state["hello"]:
+        raise GraderError("the sandbox broke its protocol")
+    elif ev == "load_error":
+        k = header.get("k")
+        if isinstance(k, int) and 0 <= k < len(job.statements):
+            run.load_errors.append((k, str(header.get("error", ""))[:400]))
+            if k not in skip:
+                skip.append(k)
+    elif ev == "ready":
+        state["deadline"] = time.monotonic() + (job.checks[0].wall + 10 if job.checks else 10)
+    elif ev == "check":
+        cid = header.get("id")
+        if cid not in by_id or cid in run.checks:
             raise GraderError("the sandbox broke its protocol")
-        elif ev == "load_error":
-            k = header.get("k")
-            if isinstance(k, int) and 0 <= k < len(job.statements):
-                run.load_errors.append((k, str(header.get("error", ""))[:400]))
-                if k not in skip:
-                    skip.append(k)
-        elif ev == "ready":
-            deadline = time.monotonic() + (job.checks[0].wall + 10 if job.checks else 10)
-        elif ev == "check":
-            cid = header.get("id")
-            if cid not in by_id or cid in run.checks:
-                raise GraderError("the sandbox broke its protocol")
-            c = by_id[cid]
-            status = str(header.get("status", ""))[:40]
-            answer = last_answer(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
-            calls = decode_answers(answer) if answer is not None else None
-            del answer, blobs, frame
-            if calls is None:
-                cr = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb))
-            else:
-                cr = CheckRun(calls=calls)
-            del calls
-            if judge is not None:  # judged now, then dropped: one check's answers at a time
-                judge(cid, cr)
-                cr = CheckRun(failure=cr.failure)
-            run.checks[cid] = cr
-            nxt = next((x for x in job.checks if x.id not in run.checks), None)
-            deadline = time.monotonic() + (nxt.wall + 10 if nxt else 10)
-        elif ev == "finished":
-            return
+        c = by_id[cid]
+        status = str(header.get("status", ""))[:40]
+        answer = last_answer(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
+        calls = decode_answers(answer) if answer is not None else None
+        del answer, blobs[:]
+        cr = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb)) if calls is None else CheckRun(calls=calls)
+        del calls
+        if judge is not None:  # judged now, then dropped: one check's answers at a time
+            judge(cid, cr)
+            cr = CheckRun(failure=cr.failure)
+        run.checks[cid] = cr
+        nxt = next((x for x in job.checks if x.id not in run.checks), None)
+        state["deadline"] = time.monotonic() + (nxt.wall + 10 if nxt else 10)
+    elif ev == "finished":
+        return True
+    return False
 
 
 def _next_frame(fd: int, buf: bytearray, deadline: float):
-    """Read one frame from the harness (the trusted zygote: still capped)."""
+    """Read one frame from the harness (the trusted zygote: still capped). Once its header is read,
+    the frame's bytes go straight into one buffer of the frame's size (no copy of a large answer)."""
     need = None
     while True:
         if len(buf) >= 4 and need is None:
@@ -901,14 +937,24 @@ def _next_frame(fd: int, buf: bytearray, deadline: float):
                 except (ValueError, KeyError, TypeError, RecursionError, OverflowError):
                     return None
                 need = 4 + n + sum(sizes)
+                if need > BIG_FRAME_BYTES:  # one large answer in this grader at a time, whatever --jobs
+                    if not _BIG_FRAME.acquire(timeout=max(0.0, deadline - time.monotonic())):
+                        return None
+                    header["_big"] = True
+                if len(buf) < need:  # the rest is read into the frame's own buffer
+                    whole = bytearray(need)
+                    whole[:len(buf)] = buf
+                    got = len(buf)
+                    del buf[:]
+                    if not _read_into(fd, memoryview(whole)[got:], deadline):
+                        if header.get("_big"):
+                            _BIG_FRAME.release()
+                        return None
+                    return _cut(header, whole, 4 + n, sizes)
         if need is not None and len(buf) >= need:
-            whole = bytes(buf[:need]) if len(buf) > need else bytes(buf)  # the frame, copied once
+            whole = bytearray(buf[:need])
             del buf[:need]
-            view, blobs, pos = memoryview(whole), [], 4 + n
-            for s in sizes:
-                blobs.append(view[pos: pos + s])
-                pos += s
-            return header, blobs
+            return _cut(header, whole, 4 + n, sizes)
         left = deadline - time.monotonic()
         if left <= 0 or not select.select([fd], [], [], left)[0]:
             return None
@@ -916,3 +962,30 @@ def _next_frame(fd: int, buf: bytearray, deadline: float):
         if not chunk:
             return None
         buf += chunk
+
+
+#: a frame larger than this (the answers of one check) is read, decoded and judged by one thread of
+#: the grader at a time (:data:`_BIG_FRAME`): with --jobs 2, two answers just under the 64 MB cap
+#: made the grader's peak 2.6x the solutions' (291 MB against 113 MB, benchmarks/bench_grade.py)
+BIG_FRAME_BYTES = 8 * 2 ** 20
+_BIG_FRAME = threading.Semaphore(1)
+
+
+def _read_into(fd: int, view: memoryview, deadline: float) -> bool:
+    while len(view):
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            return False
+        n = os.readv(fd, [view])
+        if not n:
+            return False
+        view = view[n:]
+    return True
+
+
+def _cut(header: dict, whole: bytearray, pos: int, sizes: list) -> tuple[dict, list]:
+    view, blobs = memoryview(whole), []
+    for s in sizes:
+        blobs.append(view[pos: pos + s])
+        pos += s
+    return header, blobs
