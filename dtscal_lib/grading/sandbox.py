@@ -75,8 +75,9 @@ WALL_S, CPU_S, MEM_MB, OUTPUT_CHARS = 10.0, 8, 2048, 2000
 MAX_WALL_S, MAX_CPU_S, MIN_MEM_MB = 600.0, 600, 1024
 #: the submission's working tmpfs: the notebooks' exercises write no file at all
 TMPFS_MB = 64
-#: a sandbox that fails on the grader's side is started again this many times
-RETRIES = 3
+#: a sandbox that fails on the grader's side is started again this many times, after a pause
+#: growing by this many seconds each time
+RETRIES, RETRY_PAUSE_S = 3, 0.2
 
 
 def validate_limits(wall_s, cpu_s, mem_mb) -> None:
@@ -721,7 +722,7 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *, mem_mb: int = 
             _one_sandbox(job, run, skip, judge)
         except GraderError as exc:
             errors.append(str(exc))
-            time.sleep(0.2 * (attempt + 1))
+            time.sleep(RETRY_PAUSE_S * (attempt + 1))
         todo = [c for c in jobs if c.id not in run.checks]
     if todo:  # the checks answered before the failure travel with it (the caller keeps them)
         exc = GraderError(f"{GRADER_ERROR} ({'; '.join(errors)[-600:]})")
