@@ -3,17 +3,20 @@
 :func:`run_calls` hands the submission's statements and the checks' inputs (never the
 expected answers), typed as :class:`CheckJob` / :class:`SandboxJob`, to
 :mod:`dtscal_lib.grading.harness`, which runs inside a bubblewrap sandbox
-(``bwrap``, Debian's ``bubblewrap``; :func:`bwrap_argv`) that holds only:
+(``bwrap``, Debian's ``bubblewrap``; :func:`bwrap_argv`) that holds only its :class:`Manifest`
+(:func:`manifest`), read-only:
 
-* the interpreter and its standard library, numpy (and its ``numpy.libs``), the kit's allowed
-  modules (:data:`dtscal_lib.grading.loader.KIT_ALLOWED`) and the harness, all read-only;
-  ``/usr`` for the C libraries, with Debian's Python packages, ``/usr/local`` and every OpenCV
-  library covered; no ``/etc``, no home, no kit checkout, no ``.git``, no ``grading/``, no class
+* the interpreter and its standard library (minus :data:`STDLIB_LEFT_OUT` and
+  :data:`DYNLOAD_LEFT_OUT`), numpy (and its ``numpy.libs``), the kit's allowed modules
+  (:data:`dtscal_lib.grading.loader.KIT_ALLOWED`) and the harness;
+* exactly the shared libraries those load (their ELF dependencies as ``ldd`` resolves them),
+  every symbolic link on the way kept (Debian's ``/etc/alternatives`` for BLAS); no other file of
+  ``/usr``, ``/etc`` or ``/opt``, no home, no kit checkout, no ``.git``, no ``grading/``, no class
   folder, no other submission, no host socket;
-* a private working tmpfs of :data:`TMPFS_MB` (the submission's only writable place), a fresh
-  ``/proc`` of its own PID namespace, a minimal ``/dev``, no network (``--unshare-net``), its own
-  user namespace with a uid per concurrent submission (:class:`_Slots`, shared by every grader
-  on the machine through lock files);
+* a private working tmpfs of :data:`TMPFS_MB` (the submission's only writable place; the root is
+  remounted read-only), a fresh ``/proc`` of its own PID namespace, a minimal ``/dev``, no network
+  (``--unshare-net``), its own user namespace with a uid per concurrent submission
+  (:class:`_Slots`, shared by this user's graders through lock files in a folder of its own);
 * seccomp filters (:mod:`.seccomp`): the first loaded by bwrap itself.
 
 One sandbox per submission (all its checks in it, each in a fresh worker process forked from a
@@ -29,10 +32,13 @@ next check's arrive. The sandbox writes no file
 the grader reads. Only values come back, never verdicts: the grader compares them with the truth
 it alone holds (:mod:`.checks`).
 
-Where bubblewrap cannot run (no user namespaces, as in some containers), the same harness runs
-as a bare process; :func:`barriers` says which barriers hold, for ``results.json`` and the
-command line. A sandbox that fails to start or dies on the grader's side is retried
-(:data:`RETRIES`); then :class:`GraderError` says "not graded: grader error, rerun".
+Where bubblewrap cannot run (no user namespaces, as in some containers), ``dtscal grade``
+refuses unless the instructor accepts the risk (:mod:`.command`, :mod:`.preflight`); then the
+same harness runs as a bare process in a session of its own, and :func:`barriers` says which
+barriers hold (and which do not), for ``results.json`` and the command line. A sandbox that
+fails to start or dies on the grader's side is retried (:data:`RETRIES`) with the checks not yet
+answered; then :class:`GraderError` says "not graded: grader error, rerun" and carries the
+answers already given.
 """
 
 from __future__ import annotations
