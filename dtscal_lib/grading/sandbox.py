@@ -600,8 +600,9 @@ def barriers() -> dict:
                    processes="a session and process group of its own; seccomp: no new process, signals only to "
                              "itself; the grader's process is undumpable (no /proc/PID/mem of it)")
     out["not_held"] = [f"filesystem ({why}): the student's code reads and writes what the grader's user can, the "
-                       "hidden cases and the other submissions included; OpenCV and the kit's solvers are refused "
-                       "only by the import rule", "PID namespace", "network namespace", "user namespace"]
+                       "hidden cases and the other submissions included; the import rule stops OpenCV and the kit's "
+                       "solvers imported by name, not loaded by path (importlib.util.spec_from_file_location)",
+                       "PID namespace", "network namespace", "user namespace"]
     if not sec:
         out["not_held"].append("seccomp (no system-call table for this architecture): processes, signals, sockets")
     return out
