@@ -8,6 +8,8 @@
    the test corpus (35 %) or the untouched student notebook (10 %). Target: < 60 s wall, sandbox included.
 3. Baseline, measured in the same run: ``--jobs 1`` against ``--jobs 2`` on the first
    10 students (50 submissions); the ratio says what the second process buys.
+5. The grader's own peak memory (its ru_maxrss) on a class of notebook-02 solutions, beside the same
+   class whose apply_homography answers just under the 64 MB cap per check. Target: <= 2x.
 4. The sandbox's cost: the same class graded in this process with ``--jobs 2``, once in
    bubblewrap and once with the harness run as a bare process (the benchmark switches
    ``sandbox.MODE``; the grader has no such option). Target: bubblewrap <= 1.5x bare; prints
@@ -101,6 +103,41 @@ def sandbox_cost(cls: Path) -> dict:
     return out
 
 
+#: a last cell that makes apply_homography answer just under the 64 MB cap of a check (the
+#: budget is per worker process, i.e. per check): the answers a student chooses to make large
+BIG_ANSWERS = """
+import numpy as np
+
+
+def apply_homography(H, pts):
+    left = apply_homography.__dict__.setdefault("left", 62 * 2 ** 20)
+    n = min(left // 2, 32 * 2 ** 20) // 8
+    apply_homography.left = left - 8 * n
+    return np.zeros(n)
+"""
+
+_PEAK = ("import resource, sys; from dtscal_lib.cli import main; rc = main(sys.argv[1:]); "
+         "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)")
+
+
+def peak_memory(tmp: Path, copies: int = 6) -> dict:
+    """The grading process's peak memory (MB, its own ru_maxrss: not the sandboxes') on a class of
+    ``copies`` notebook-02 solutions, and on the same class with answers just under the cap."""
+    nb = json.loads((ROOT / "solutions" / "02_homography.ipynb").read_text())
+    big = dict(nb, cells=nb["cells"] + [{"cell_type": "code", "metadata": {}, "execution_count": None,
+                                         "outputs": [], "source": BIG_ANSWERS}])
+    out = {}
+    for name, doc in (("solution", nb), ("big_answers", big)):
+        cls = tmp / f"mem_{name}"
+        for k in range(copies):
+            (cls / f"s{k}").mkdir(parents=True)
+            (cls / f"s{k}" / "02_homography.ipynb").write_text(json.dumps(doc))
+        run = subprocess.run([sys.executable, "-c", _PEAK, "grade", str(cls), "--jobs", "2", "-q"], cwd=ROOT,
+                             capture_output=True, text=True)
+        out[name] = int(run.stderr.strip().splitlines()[-1]) / 1024
+    return out
+
+
 def startup_cost(rounds: int = 15) -> dict:
     """Median seconds of one sandbox with one trivial check, in bubblewrap and bare (interleaved)."""
     import statistics
@@ -143,6 +180,7 @@ def main() -> int:
         parallel = grade(sub, 2, tmp)
         cost = sandbox_cost(cls)
         start = startup_cost()
+        mem = peak_memory(tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     res = {"one_notebook_s": round(one, 2), "class_submissions": n, "class_jobs2_s": round(full, 1),
@@ -155,7 +193,10 @@ def main() -> int:
            "sandbox_cost_per_check_ms": round(1000 * (cost["bubblewrap"] - cost["bare"]) / cost["checks"], 2),
            "same_scores": cost["bubblewrap_score"] == cost["bare_score"],
            "one_check_bubblewrap_ms": round(1000 * start["bubblewrap"], 1),
-           "one_check_bare_ms": round(1000 * start["bare"], 1)}
+           "one_check_bare_ms": round(1000 * start["bare"], 1),
+           "grader_peak_mb_solutions": round(mem["solution"], 1),
+           "grader_peak_mb_big_answers": round(mem["big_answers"], 1),
+           "grader_peak_ratio": round(mem["big_answers"] / mem["solution"], 2)}
     if args.json:
         print(json.dumps(res))
     else:
@@ -173,7 +214,11 @@ def main() -> int:
               f"{res['one_check_bubblewrap_ms']:.0f} ms, bare {res['one_check_bare_ms']:.0f} ms: "
               f"bubblewrap's start costs "
               f"{res['one_check_bubblewrap_ms'] - res['one_check_bare_ms']:.0f} ms per submission")
-    ok = one < 10 and full < 60 and res["bubblewrap_vs_bare"] <= 1.5 and res["same_scores"]
+        print(f"the grading process's peak memory, a class of 6 notebook-02 submissions, --jobs 2: the solution "
+              f"{res['grader_peak_mb_solutions']:.0f} MB; answers just under the 64 MB cap per check "
+              f"{res['grader_peak_mb_big_answers']:.0f} MB: {res['grader_peak_ratio']:.2f}x (target <= 2x)")
+    ok = one < 10 and full < 60 and res["bubblewrap_vs_bare"] <= 1.5 and res["same_scores"] and \
+        res["grader_peak_ratio"] <= 2
     return 0 if ok else 1
 
 

@@ -594,17 +594,27 @@ def test_grader_failure_is_retried_then_not_charged(tmp_path, material, monkeypa
     assert any(n.startswith(sandbox.GRADER_ERROR) for n in res.notes), res.notes
 
 
-def test_without_bubblewrap_the_grader_says_which_barriers_hold(tmp_path, monkeypatch, capsys):
+def test_without_bubblewrap_the_grader_refuses_unless_the_risk_is_accepted(tmp_path, monkeypatch, capsys):
+    """Without bubblewrap `dtscal grade` refuses, says why (the preflight) and names the option; with
+    the option it grades, and the barrier report states only what holds."""
     from dtscal_lib.cli import main as dtscal
+    from dtscal_lib.grading.command import UNCONFINED
 
     monkeypatch.setattr(sandbox, "MODE", "bare")
     p = tmp_path / "02_homography.ipynb"
     shutil.copy(CORRECT, p)
     out = tmp_path / "results.json"
-    assert dtscal(["grade", str(p), "--json", str(out), "-q"]) == 0
+    assert dtscal(["grade", str(p), "--json", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "not grading: bubblewrap cannot run here" in err and UNCONFINED in err and "Fix:" in err, err
+    assert not out.exists()
+    assert dtscal(["grade", str(p), "--json", str(out), "-q", UNCONFINED]) == 0
     data = json.loads(out.read_text())
-    assert data["sandbox"]["mode"] == "bare" and "NO filesystem barrier" in data["sandbox"]["filesystem"]
+    held = data["sandbox"]
+    assert held["mode"] == "bare" and "filesystem" not in held and "user" not in held
+    assert any(n.startswith("filesystem") for n in held["not_held"]) and "PID namespace" in held["not_held"]
+    assert "signals only to itself" in held["processes"] and "sockets refused" in held["network"]
     assert data["score"] == 20
-    assert "sandbox: bare" in capsys.readouterr().err
+    assert "sandbox: bare -- NOT held: filesystem" in capsys.readouterr().err
     run = _run("def f():\n    os.execv('/bin/true', ['true'])\n")  # seccomp holds without bubblewrap
     assert "Operation not permitted" in _said(run)

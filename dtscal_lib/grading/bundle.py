@@ -77,8 +77,9 @@ rm -f "$RESULTS"
     --json "$RESULTS" {assignment}-q \\
     > "$ROOT/results/grade.log" 2>&1
 status=$?
-if [ "$status" -eq 3 ] || grep -q '^Traceback' "$ROOT/results/grade.log"; then
-  # the grader failed, not the student's code: no grade at all. Without results.json Gradescope shows
+if [ "$status" -eq 3 ] || grep -q -e '^Traceback' -e 'not grading: bubblewrap' "$ROOT/results/grade.log"; then
+  # the grader failed (or refused: no bubblewrap in this image), not the student's code: no grade at all.
+  # Without results.json Gradescope shows
   # "The autograder failed to execute correctly" (never a 0); the instructor reruns the submission.
   [ -f "$RESULTS" ] && mv "$RESULTS" "$ROOT/results/not-graded.json"
   echo "not graded: grader error, rerun (the grader failed, not the student's code): results/grade.log" >&2
@@ -102,7 +103,7 @@ TREES = ("dtscal_lib", "grading")
 FILES = ("pyproject.toml", "README.md", "LICENSE")
 
 
-def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> Path:
+def write_bundle(out_zip, material_root=None, assignment: str | None = None, unconfined: bool = False) -> Path:
     """Write the Gradescope autograder zip; returns its path.
 
     Parameters
@@ -110,13 +111,18 @@ def write_bundle(out_zip, material_root=None, assignment: str | None = None) -> 
     out_zip : path of the zip to write
     material_root : the kit with ``grading/`` and ``solutions/`` (default: this kit)
     assignment : grade every upload as this assignment (default: from the file names)
+    unconfined : grade even where Gradescope's image cannot run bubblewrap (the instructor's
+        ``--let-student-code-read-my-files``, passed on to every run); without it such a run is an
+        autograder failure whose log says why bubblewrap fails
     """
     root = find_material(material_root)
     out = Path(out_zip)
     if out.suffix != ".zip":
         raise DtscalError(f"{out} should end in .zip (Gradescope takes a zip file)")
     out.parent.mkdir(parents=True, exist_ok=True)
-    flag = f"--assignment {assignment} " if assignment else ""
+    from .command import UNCONFINED
+
+    flag = (f"--assignment {assignment} " if assignment else "") + (f"{UNCONFINED} " if unconfined else "")
     with safe_write.output(out, what="Gradescope bundle", suffix=".part") as tmp, \
             zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         _add_text(z, "setup.sh", SETUP_SH)

@@ -7,6 +7,10 @@ import sys
 from .sandbox import CPU_S, MEM_MB, WALL_S, validate_limits
 
 
+#: the option that accepts grading without bubblewrap: it names the risk
+UNCONFINED = "--let-student-code-read-my-files"
+
+
 def add_parser(sub) -> None:
     """Register ``grade`` on the ``dtscal`` sub-command parser."""
     sp = sub.add_parser("grade", help="grade submissions against the hidden cases (instructor)")
@@ -32,6 +36,10 @@ def add_parser(sub) -> None:
     sp.add_argument("--wall", type=float, default=WALL_S, help=f"seconds per check (default {WALL_S:g})")
     sp.add_argument("--cpu", type=int, default=CPU_S, help=f"CPU seconds per check (default {CPU_S})")
     sp.add_argument("--mem", type=int, default=MEM_MB, help=f"memory per submission, MB (default {MEM_MB})")
+    sp.add_argument(UNCONFINED, action="store_true", dest="unconfined",
+                    help="grade even where bubblewrap cannot run: student code then reads (and writes) every file "
+                         "this user can, the hidden cases and the other submissions included; without this "
+                         "option `dtscal grade` refuses and says why bubblewrap fails here")
     sp.add_argument("-q", "--quiet", action="store_true", help="no table, no progress bar")
     sp.set_defaults(func=cmd_grade)
     add_nbgrader_option(sub)
@@ -76,7 +84,8 @@ def cmd_grade(args) -> int:
     if args.gradescope_bundle:
         from .bundle import write_bundle
 
-        out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment)
+        out = write_bundle(args.gradescope_bundle, material_root=args.material, assignment=args.assignment,
+                           unconfined=args.unconfined)
         print(f"wrote {out}: upload it as the autograder of a Gradescope programming assignment")
         return 0
     _check_outputs(args)  # a --csv that is a folder or a disk: refused before the class is graded
@@ -102,6 +111,7 @@ def cmd_grade(args) -> int:
     if not 1 <= args.jobs <= 64:
         raise DtscalError(f"--jobs {args.jobs}: give between 1 and 64 submissions graded in parallel")
     validate_limits(args.wall, args.cpu, args.mem)
+    refuse_without_sandbox(args.unconfined)
     material = Material.load(args.material)
     from .preflight import check_numpy
 
@@ -147,6 +157,23 @@ def _class_wide_notes(notes: dict[str, list[str]]) -> tuple[dict[str, list[str]]
     return rows, per_class
 
 
+def refuse_without_sandbox(unconfined: bool) -> None:
+    """Where bubblewrap cannot run, refuse to grade (with why and the fix, :mod:`.preflight`)
+    unless the instructor accepted the risk with :data:`UNCONFINED`."""
+    from ..errors import DtscalError
+    from . import sandbox
+
+    if sandbox.mode() == "bubblewrap" or unconfined:
+        return
+    from .preflight import diagnose, facts
+
+    said = sandbox.bwrap_available()[1] if sandbox.MODE is None else "bubblewrap turned off (sandbox.MODE)"
+    causes = "\n".join(f"  - {c.line()}" for c in diagnose(facts(), said))
+    raise DtscalError("not grading: bubblewrap cannot run here, so student code would read and write every file "
+                      f"this user can (the hidden cases, the other submissions).\n{causes}\nFix that (docs/ta.md, "
+                      f"'Grading without bubblewrap'), or accept the risk with {UNCONFINED}.")
+
+
 def _grade_roster(args, r, material) -> int:
     from .grade import not_handed_in
     from .classroom import grade_all
@@ -163,8 +190,8 @@ def _grade_roster(args, r, material) -> int:
     from .sandbox import barriers
 
     held = barriers()  # which barriers hold around each submission on this machine (also in results.json)
-    print(f"sandbox: {held['mode']}" + ("" if held["mode"] == "bubblewrap" else f" -- {held['filesystem']}"),
-          file=sys.stderr)
+    print(f"sandbox: {held['mode']}" + ("" if held["mode"] == "bubblewrap" else
+                                        " -- NOT held: " + "; ".join(held["not_held"])), file=sys.stderr)
     results = grade_all(r.items, material, jobs=args.jobs, progress=not args.quiet,
                         wall_s=args.wall, cpu_s=args.cpu, mem_mb=args.mem)
     by_student = {s: [] for s in r.students}

@@ -343,7 +343,8 @@ def grade_file(path, material: Material, assignment: str, *, student: str = "",
 def _run_and_judge(g: Grading, plan: list[Planned]) -> None:
     if not plan:
         return
-    run, lost = _sandbox(g, [p.job for p in plan])
+    by_id = {p.job.id: p for p in plan}
+    run, lost = _sandbox(g, [p.job for p in plan], lambda cid, cr: _judge(g, by_id[cid], cr))
     # the grader failed, not the student: a function with a check that was never answered is not
     # graded yet (its answered checks wait for the rerun too); a lost probe only costs the diagnosis
     failed = {id(p.function): p.function for p in plan if p.job.id in lost and p.probe is None}
@@ -356,20 +357,20 @@ def _run_and_judge(g: Grading, plan: list[Planned]) -> None:
         note = f"statement at {where} skipped: {_cell_lines(g.sub, err)}"
         if note not in g.res.notes:
             g.res.notes.append(note)
-    _judge(g, run, [p for p in plan if id(p.function) not in failed and p.job.id not in lost])
 
 
-def _sandbox(g: Grading, jobs: list[Job]) -> tuple[SandboxRun, set[int]]:
+def _sandbox(g: Grading, jobs: list[Job], judge) -> tuple[SandboxRun, set[int]]:
     """The sandbox run of ``jobs`` and the ids of those never answered: a failure of the grader's
     side is retried (the unanswered jobs only, keeping the answers already given); what is still
-    unanswered after :data:`GRADER_ATTEMPTS` tries is the grader's failure, never a 0."""
+    unanswered after :data:`GRADER_ATTEMPTS` tries is the grader's failure, never a 0. Each answer
+    is judged as it arrives (``judge``) and then dropped."""
     kw = {"mem_mb": g.limits.mem_mb} if g.limits.mem_mb else {}
     merged, errors, todo = SandboxRun(), [], list(jobs)
     for attempt in range(GRADER_ATTEMPTS):
         if attempt:
             time.sleep(GRADER_RETRY_PAUSE_S[min(attempt, len(GRADER_RETRY_PAUSE_S)) - 1])
         try:
-            run = run_calls(g.statements, todo, **kw)
+            run = run_calls(g.statements, todo, judge=judge, **kw)
         except Exception as exc:  # noqa: BLE001 - the sandbox itself failed (GraderError or worse): try again
             errors.append(f"{type(exc).__name__}: {str(exc).strip()[:300]}")
             run = getattr(exc, "run", None)  # what it answered before it failed
@@ -385,36 +386,35 @@ def _sandbox(g: Grading, jobs: list[Job]) -> tuple[SandboxRun, set[int]]:
     return merged, {j.id for j in todo}
 
 
-def _judge(g: Grading, run: SandboxRun, plan: list[Planned]) -> None:
-    """Judge every check of ``plan`` (and diagnose from the probes) into ``g.judged[(function, i)][variant]``."""
-    for p in plan:
-        fr = p.function
-        cr = run.checks.get(p.job.id, CheckRun(failure="not run"))
-        if p.probe is not None:
-            try:
-                _diagnose(fr, list(p.probe), cr)
-            except Exception:  # noqa: BLE001 - no diagnosis is better than no grade
-                fr.diagnosis = ""
-            continue
-        k = 0
-        for part in p.parts:  # the calls of each check, laid end to end in the job
-            b = part.check
-            one = cr
-            if len(p.parts) > 1 or p.variant == "stand-in":
-                calls = cr.calls[k:k + len(b.calls)]
-                k += len(b.calls)
-                one = CheckRun(calls=calls) if len(calls) == len(b.calls) else \
-                    CheckRun(failure=cr.failure or "the check did not finish")
-            used = sorted({h for c in one.calls for h in c.honesty})
-            if used:
-                g.honesty.setdefault((fr.name, p.variant), set()).update(used)
-            frac, msg = b.judge(b, one)
-            msg = _cell_lines(g.sub, msg)
-            frac = min(1.0, max(0.0, float(frac)))
-            printed = next((c.stdout for c in one.calls if c.stdout.strip()), "")
-            if printed and frac < 1:
-                msg += f"\nprinted: {printed[:300]}" + (" ... (output truncated)" if len(printed) > 300 else "")
-            g.judged.setdefault((fr.name, part.index), {})[p.variant] = Verdict(frac, msg)
+def _judge(g: Grading, p: Planned, cr: CheckRun) -> None:
+    """Judge the checks of one job ``p`` from its run ``cr`` (or diagnose from the probe) into
+    ``g.judged[(function, i)][variant]``."""
+    fr = p.function
+    if p.probe is not None:
+        try:
+            _diagnose(fr, list(p.probe), cr)
+        except Exception:  # noqa: BLE001 - no diagnosis is better than no grade
+            fr.diagnosis = ""
+        return
+    k = 0
+    for part in p.parts:  # the calls of each check, laid end to end in the job
+        b = part.check
+        one = cr
+        if len(p.parts) > 1 or p.variant == "stand-in":
+            calls = cr.calls[k:k + len(b.calls)]
+            k += len(b.calls)
+            one = CheckRun(calls=calls) if len(calls) == len(b.calls) else \
+                CheckRun(failure=cr.failure or "the check did not finish")
+        used = sorted({h for c in one.calls for h in c.honesty})
+        if used:
+            g.honesty.setdefault((fr.name, p.variant), set()).update(used)
+        frac, msg = b.judge(b, one)
+        msg = _cell_lines(g.sub, msg)
+        frac = min(1.0, max(0.0, float(frac)))
+        printed = next((c.stdout for c in one.calls if c.stdout.strip()), "")
+        if printed and frac < 1:
+            msg += f"\nprinted: {printed[:300]}" + (" ... (output truncated)" if len(printed) > 300 else "")
+        g.judged.setdefault((fr.name, part.index), {})[p.variant] = Verdict(frac, msg)
 
 
 def _names(names) -> str:
@@ -473,8 +473,16 @@ def _cell_lines(sub: Submission, text: str) -> str:
     return re.sub(r"\(line (\d+) in ", lambda m: f"({sub.where(int(m.group(1)))} in ", text)
 
 
+#: the diagnosis compares a probe's answers with each named mistake, making arrays of their size:
+#: answers larger than this (the largest probe answer, notebook 04's 640x480 pair of maps, has
+#: 614,400 numbers) match no mistake, and are not compared (the grader's memory stays its own)
+MAX_PROBE_NUMBERS = 2_000_000
+
+
 def _diagnose(fr: FunctionResult, probe: list, cr: CheckRun) -> None:
     if cr.failure or len(cr.calls) < len(probe):
+        return
+    if any(getattr(c.value, "size", 0) > MAX_PROBE_NUMBERS for c in cr.calls):
         return
     outputs = [c.value if c.ok else RuntimeError(c.error) for c in cr.calls]
     mistake = diagnosis.diagnose(fr.name, probe, outputs)

@@ -43,6 +43,9 @@ ALLOWED_KIT_IMPORTS = ("dtscal_lib.duckietown", "dtscal_lib.errors")
 MAX_CODE_CHARS = 256 * 1024
 #: a notebook file (outputs, images included): the largest solution notebook is 0.59 MB
 MAX_NOTEBOOK_BYTES = 32 * 2 ** 20
+#: cells of a notebook: the largest solution notebook has 30 (notebook 04, 16 of code); a notebook of
+#: 10,000 cells took 75 s to grade (3 s normally), so 500 (17x the largest) bounds that at ~4 s
+MAX_CELLS = 500
 
 
 #: one ``ast.parse`` at a time in this process: CPython's parser is not safe to call from two
@@ -99,9 +102,14 @@ def read_cells(path: Path) -> list[tuple[str, int]]:
     try:
         nb = json.loads(path.read_text(encoding="utf-8", errors="replace"))
         cells = nb["cells"]
-    except (ValueError, KeyError, TypeError) as exc:
-        raise DtscalError(f"{path} is not a readable notebook ({exc}); hand in the .ipynb file Jupyter saved") \
-            from None
+        count = len(cells)
+    except (ValueError, KeyError, TypeError, RecursionError) as exc:
+        raise DtscalError(f"{path} is not a readable notebook ({type(exc).__name__}: {str(exc)[:200]}); hand in "
+                          "the .ipynb file Jupyter saved") from None
+    if count > MAX_CELLS:
+        raise DtscalError(f"{path.name} has {count} cells, more than the {MAX_CELLS} a submission may have (the "
+                          "longest notebook of the course has 30); hand in the course notebook with your exercise "
+                          "cells, without the scratch cells")
     blocks, line = [], 1
     for cell in cells:
         if not isinstance(cell, dict) or cell.get("cell_type") != "code":

@@ -3,17 +3,20 @@
 :func:`run_calls` hands the submission's statements and the checks' inputs (never the
 expected answers), typed as :class:`CheckJob` / :class:`SandboxJob`, to
 :mod:`dtscal_lib.grading.harness`, which runs inside a bubblewrap sandbox
-(``bwrap``, Debian's ``bubblewrap``; :func:`bwrap_argv`) that holds only:
+(``bwrap``, Debian's ``bubblewrap``; :func:`bwrap_argv`) that holds only its :class:`Manifest`
+(:func:`manifest`), read-only:
 
-* the interpreter and its standard library, numpy (and its ``numpy.libs``), the kit's allowed
-  modules (:data:`dtscal_lib.grading.loader.KIT_ALLOWED`) and the harness, all read-only;
-  ``/usr`` for the C libraries, with Debian's Python packages, ``/usr/local`` and every OpenCV
-  library covered; no ``/etc``, no home, no kit checkout, no ``.git``, no ``grading/``, no class
+* the interpreter and its standard library (minus :data:`STDLIB_LEFT_OUT` and
+  :data:`DYNLOAD_LEFT_OUT`), numpy (and its ``numpy.libs``), the kit's allowed modules
+  (:data:`dtscal_lib.grading.loader.KIT_ALLOWED`) and the harness;
+* exactly the shared libraries those load (their ELF dependencies as ``ldd`` resolves them),
+  every symbolic link on the way kept (Debian's ``/etc/alternatives`` for BLAS); no other file of
+  ``/usr``, ``/etc`` or ``/opt``, no home, no kit checkout, no ``.git``, no ``grading/``, no class
   folder, no other submission, no host socket;
-* a private working tmpfs of :data:`TMPFS_MB` (the submission's only writable place), a fresh
-  ``/proc`` of its own PID namespace, a minimal ``/dev``, no network (``--unshare-net``), its own
-  user namespace with a uid per concurrent submission (:class:`_Slots`, shared by every grader
-  on the machine through lock files);
+* a private working tmpfs of :data:`TMPFS_MB` (the submission's only writable place; the root is
+  remounted read-only), a fresh ``/proc`` of its own PID namespace, a minimal ``/dev``, no network
+  (``--unshare-net``), its own user namespace with a uid per concurrent submission
+  (:class:`_Slots`, shared by this user's graders through lock files in a folder of its own);
 * seccomp filters (:mod:`.seccomp`): the first loaded by bwrap itself.
 
 One sandbox per submission (all its checks in it, each in a fresh worker process forked from a
@@ -23,14 +26,19 @@ check still runs in its own process with its own limits.
 
 The answers come back as one length-prefixed frame per check over the harness's stdout, with
 hard caps on header size, number of arrays and bytes *before* anything is decoded; each array is
-a plain ``.npy`` read with ``allow_pickle=False``, each at most once. The sandbox writes no file
+a plain ``.npy`` of numbers (an object array, i.e. a pickle, is refused unread: :func:`_npy`), each
+at most once, over the frame's own bytes; each check's answers are judged and dropped before the
+next check's arrive. The sandbox writes no file
 the grader reads. Only values come back, never verdicts: the grader compares them with the truth
 it alone holds (:mod:`.checks`).
 
-Where bubblewrap cannot run (no user namespaces, as in some containers), the same harness runs
-as a bare process; :func:`barriers` says which barriers hold, for ``results.json`` and the
-command line. A sandbox that fails to start or dies on the grader's side is retried
-(:data:`RETRIES`); then :class:`GraderError` says "not graded: grader error, rerun".
+Where bubblewrap cannot run (no user namespaces, as in some containers), ``dtscal grade``
+refuses unless the instructor accepts the risk (:mod:`.command`, :mod:`.preflight`); then the
+same harness runs as a bare process in a session of its own, and :func:`barriers` says which
+barriers hold (and which do not), for ``results.json`` and the command line. A sandbox that
+fails to start or dies on the grader's side is retried (:data:`RETRIES`) with the checks not yet
+answered; then :class:`GraderError` says "not graded: grader error, rerun" and carries the
+answers already given.
 """
 
 from __future__ import annotations
@@ -44,6 +52,7 @@ import pickle
 import select
 import shutil
 import signal
+import stat
 import struct
 import subprocess
 import sys
@@ -72,8 +81,9 @@ WALL_S, CPU_S, MEM_MB, OUTPUT_CHARS = 10.0, 8, 2048, 2000
 MAX_WALL_S, MAX_CPU_S, MIN_MEM_MB = 600.0, 600, 1024
 #: the submission's working tmpfs: the notebooks' exercises write no file at all
 TMPFS_MB = 64
-#: a sandbox that fails on the grader's side is started again this many times
-RETRIES = 3
+#: a sandbox that fails on the grader's side is started again this many times, after a pause
+#: growing by this many seconds each time
+RETRIES, RETRY_PAUSE_S = 3, 0.2
 
 
 def validate_limits(wall_s, cpu_s, mem_mb) -> None:
@@ -201,6 +211,26 @@ def split_frame(data: bytes, offset: int = 0) -> tuple[dict, list[memoryview], i
     return header, blobs, pos
 
 
+def _npy(blob: memoryview) -> np.ndarray:
+    """A plain ``.npy`` (numpy's format 1.0 or 2.0) as an array over ``blob``'s own bytes, no copy:
+    numbers only; an object array (a pickle, which would run code here) is refused, never loaded."""
+    head = io.BytesIO(bytes(blob[:min(len(blob), 65536 + 16)]))
+    version = np.lib.format.read_magic(head)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(head)
+    elif version == (2, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(head)
+    else:
+        raise ValueError(f"npy format {version}")
+    if dtype.hasobject or dtype.kind not in "biuf":
+        raise ValueError("not an array of numbers (a pickle?)")
+    count = int(np.prod(shape, dtype=np.int64))
+    if head.tell() + count * dtype.itemsize != len(blob):
+        raise ValueError("size does not match the header")
+    arr = np.frombuffer(blob, dtype=dtype, count=count, offset=head.tell())
+    return arr.reshape(shape, order="F" if fortran else "C")
+
+
 class _Decoder:
     """Arrays of one answer frame: each blob decoded at most once (no fan-out of one array)."""
 
@@ -223,7 +253,7 @@ class _Decoder:
                 return None, "unreadable answer"
             self.used.add(i)
             try:
-                arr = np.load(io.BytesIO(self.blobs[i]), allow_pickle=False)
+                arr = _npy(self.blobs[i])
             except Exception:  # noqa: BLE001
                 return None, "unreadable answer"
             if type(arr) is not np.ndarray or arr.dtype.kind not in "biuf":
@@ -232,14 +262,14 @@ class _Decoder:
         return None, ""
 
 
-def last_answer(data: bytes) -> bytes | None:
+def last_answer(data: bytes) -> memoryview | None:
     """The answer frame that closes a worker's output (length + mark at the very end), or None."""
     if len(data) < 16 or data[-8:] != ANSWER_MARK:
         return None
     (n,) = struct.unpack(">Q", data[-16:-8])
     if n > len(data) - 16:
         return None
-    return data[len(data) - 16 - n: len(data) - 16]
+    return memoryview(data)[len(data) - 16 - n: len(data) - 16]
 
 
 def decode_answers(data: bytes) -> list[Call] | None:
@@ -518,8 +548,9 @@ def probe_argv(code: str) -> list[str]:
     """The command that runs ``code`` with the interpreter and numpy a submission gets (inside bubblewrap,
     or bare where there is none), without the harness: for checks at the grader's start."""
     if mode() == "bare":
-        exe, _, numpy_binds = _python()
-        return [exe, "-I", "-S", "-c", f"import sys; sys.path[:0] = [{os.path.dirname(numpy_binds[0])!r}]; {code}"]
+        m = manifest()
+        site = os.path.dirname(m.trees["/sandbox/site/numpy"])
+        return [m.interpreter, "-I", "-S", "-c", f"import sys; sys.path[:0] = [{site!r}]; {code}"]
     argv = bwrap_argv(0, None)
     i = argv.index("--")
     return argv[:i + 1] + [argv[i + 1], "-I", "-S", "-c", f"import sys; sys.path[:0] = ['/sandbox/site']; {code}"]
@@ -556,30 +587,37 @@ def mode() -> str:
 
 
 def barriers() -> dict:
-    """What holds around a submission on this machine, in words (results.json, command line)."""
+    """What holds around a submission on this machine, in words (results.json, command line):
+    only barriers that hold; without bubblewrap, ``not_held`` names those missing."""
     m = mode()
-    sec = ("seccomp: no exec, no ptrace/mount/unshare/bpf/keyctl/memfd_create/io_uring/sockets; the student's "
-           "code can start no process or thread and signal only itself" if seccomp.supported()
-           else "no seccomp filter (no system-call table for this architecture)")
-    out = {"mode": m, "seccomp": sec,
+    sec = ("seccomp: no exec, no ptrace/mount/unshare/bpf/keyctl/memfd_create/io_uring/sockets, no fcntl/ioctl "
+           "that names a process to signal; the student's code can start no process or thread and signal only "
+           "itself" if seccomp.supported() else None)
+    out = {"mode": m, **({"seccomp": sec} if sec else {}),
            "memory": "address space capped per process (--mem); the student's code runs in one process that "
                      "can start no other, so the cap bounds the submission",
            "answers": "values only, over a capped length-prefixed pipe; judged outside the sandbox"}
     if m == "bubblewrap":
-        out.update(filesystem="bubblewrap: only the interpreter, numpy and the kit's allowed modules, read-only; "
-                              f"a private {TMPFS_MB} MB tmpfs; no kit checkout, grading material, home, /etc or "
-                              "other submissions",
+        out.update(filesystem="bubblewrap: only its manifest (the interpreter, its standard library, numpy, the "
+                              "kit's allowed modules and the libraries these load), read-only; a private "
+                              f"{TMPFS_MB} MB tmpfs; no kit checkout, grading material, home, /etc or other "
+                              "submissions",
                    network="network namespace: no network, no host socket",
                    processes="PID namespace: the submission sees and signals only its own processes, all die "
                              "with it",
-                   user="user namespace: a uid per concurrent submission (lock files shared by all graders)")
-    else:
-        why = bwrap_available()[1] if MODE is None else "bubblewrap turned off"
-        out.update(filesystem=f"NO filesystem barrier ({why}): the student's code reads what the grader's user "
-                              "can read; OpenCV and the kit's solvers are refused only by the import rule",
-                   network="no network namespace: sockets refused by seccomp",
-                   processes="no PID namespace: the student's code can start no process (seccomp)",
-                   user="the grader's own user")
+                   user="user namespace: a uid per concurrent submission (lock files of the grader's own user)")
+        return out
+    why = bwrap_available()[1] if MODE is None else "bubblewrap turned off"
+    if sec:
+        out.update(network="sockets refused by seccomp",
+                   processes="a session and process group of its own; seccomp: no new process, signals only to "
+                             "itself; the grader's process is undumpable (no /proc/PID/mem of it)")
+    out["not_held"] = [f"filesystem ({why}): the student's code reads and writes what the grader's user can, the "
+                       "hidden cases and the other submissions included; the import rule stops OpenCV and the kit's "
+                       "solvers imported by name, not loaded by path (importlib.util.spec_from_file_location)",
+                       "PID namespace", "network namespace", "user namespace"]
+    if not sec:
+        out["not_held"].append("seccomp (no system-call table for this architecture): processes, signals, sockets")
     return out
 
 
@@ -588,22 +626,44 @@ def barriers() -> dict:
 
 class _Slots:
     """A uid slot per concurrent submission, on this machine: a lock file per slot (flock),
-    so two graders started at once never run submissions under the same uid."""
+    so two graders of one user started at once never run submissions under the same uid.
 
-    DIR = Path(tempfile.gettempdir()) / "dtscal-grade-slots"
+    The lock files lie in a folder only the grader's user can write (:meth:`directory`): in a
+    folder that others can write (the world-writable temp folder), any local user could create and
+    hold every slot file first, and every student of the grader would be "grader error"."""
 
     def __init__(self):
         self.lock = threading.Lock()
 
+    @staticmethod
+    def directory() -> Path:
+        """``$XDG_RUNTIME_DIR/dtscal-grade-slots``, else ``~/.cache/dtscal-grade-slots``, else
+        ``$TMPDIR/dtscal-grade-slots-UID``: the first that is a real folder of this user's that no
+        one else may write (0700); else a private folder of this grader alone."""
+        uid = os.getuid()
+        places = [Path(os.environ["XDG_RUNTIME_DIR"]) / "dtscal-grade-slots"] if os.environ.get(
+            "XDG_RUNTIME_DIR") else []
+        places += [Path(os.path.expanduser("~")) / ".cache" / "dtscal-grade-slots",
+                   Path(tempfile.gettempdir()) / f"dtscal-grade-slots-{uid}"]
+        for d in places:
+            try:
+                d.mkdir(mode=0o700, parents=True, exist_ok=True)
+                st = os.lstat(d)
+            except OSError:
+                continue
+            if stat.S_ISDIR(st.st_mode) and st.st_uid == uid and not st.st_mode & 0o022:
+                return d
+        with _LIB_LOCK:
+            if "slots" not in _LIB:
+                _LIB["slots"] = Path(tempfile.mkdtemp(prefix="dtscal-grade-slots-"))
+                atexit.register(shutil.rmtree, _LIB["slots"], True)
+            return _LIB["slots"]
+
     def take(self) -> tuple[int, int]:
-        try:
-            self.DIR.mkdir(mode=0o1777, exist_ok=True)
-            os.chmod(self.DIR, 0o1777)
-        except OSError:
-            pass
+        d = self.directory()
         for k in range(4096):
             try:
-                fd = os.open(self.DIR / f"slot{k}-uid{os.getuid()}", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+                fd = os.open(d / f"slot{k}", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
             except OSError:
                 continue
             try:
@@ -631,8 +691,8 @@ def _as_job(c) -> CheckJob:
                     substitute=list(c.get("substitute", ())))
 
 
-def run_calls(statements: list[tuple[str, int]], checks: list, *,
-              mem_mb: int = MEM_MB, output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None) -> SandboxRun:
+def run_calls(statements: list[tuple[str, int]], checks: list, *, mem_mb: int = MEM_MB,
+              output_chars: int = OUTPUT_CHARS, workdir_files: dict | None = None, judge=None) -> SandboxRun:
     """Run ``checks`` (:class:`CheckJob`, or dicts with the same keys) on the submission.
 
     Parameters
@@ -640,6 +700,9 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
     statements : the submission's import/def statements ``(source, first line)``
     checks : inputs only; the answers are judged by the caller
     workdir_files : ``{name: bytes}`` written into the working folder
+    judge : ``judge(check id, CheckRun)``, called as each check's answer arrives; the answer is
+        then dropped (``run.checks`` keeps the check's id with no values), so the grader holds
+        one check's answers at a time, never a whole submission's
 
     Returns
     -------
@@ -658,7 +721,10 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
 
     jobs = [_as_job(c) for c in checks]
     run = SandboxRun()
+    _answers_given_back()
     m = mode()
+    if m != "bubblewrap":
+        _undumpable()
     run.notes.update(barriers())
     run.notes["pid_namespace"] = m == "bubblewrap"
     run.notes["survivors"] = 0
@@ -674,10 +740,10 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
                          cv2_deny=sorted(CV2_DENY), kit_allowed=list(KIT_ALLOWED),
                          kit_dir="/sandbox/harness/kit" if m == "bubblewrap" else str(sandbox_lib() / "kit"), mode=m)
         try:
-            _one_sandbox(job, run, skip)
+            _one_sandbox(job, run, skip, judge)
         except GraderError as exc:
             errors.append(str(exc))
-            time.sleep(0.2 * (attempt + 1))
+            time.sleep(RETRY_PAUSE_S * (attempt + 1))
         todo = [c for c in jobs if c.id not in run.checks]
     if todo:  # the checks answered before the failure travel with it (the caller keeps them)
         exc = GraderError(f"{GRADER_ERROR} ({'; '.join(errors)[-600:]})")
@@ -686,7 +752,37 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *,
     return run
 
 
-def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
+_MALLOC: dict = {}
+
+
+def _answers_given_back() -> None:
+    """Once per grader: large blocks (answers, their judging) straight from and back to the system
+    (glibc's ``mallopt(M_MMAP_THRESHOLD, 1 MiB)``, which also stops glibc raising the threshold
+    to the size of each freed block, mallopt(3)). Without it a class of answers just under the cap
+    left the grader at 233 MB against the solutions' 113 MB (freed blocks kept in the heap); with
+    it 171 MB (benchmarks/bench_grade.py)."""
+    with _LIB_LOCK:
+        if _MALLOC:
+            return
+        _MALLOC["done"] = True
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).mallopt(-3, 2 ** 20)  # M_MMAP_THRESHOLD (malloc.h)
+    except (OSError, AttributeError):  # not glibc: its own allocator's behaviour
+        pass
+
+
+def _undumpable() -> None:
+    """Without bubblewrap the student's code runs as the grader's user: make the grader's process
+    undumpable (``PR_SET_DUMPABLE`` 0), so that no process of that user opens its ``/proc/PID/mem``
+    or ``fd/`` (proc(5); the kernel's ptrace access check)."""
+    import ctypes
+
+    ctypes.CDLL(None, use_errno=True).prctl(4, 0, 0, 0, 0)
+
+
+def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int], judge=None) -> None:
     m = job.mode
     slot, slot_fd = _SLOTS.take()
     workdir = None
@@ -719,7 +815,7 @@ def _one_sandbox(job: SandboxJob, run: SandboxRun, skip: list[int]) -> None:
         drainer = threading.Thread(target=_drain, args=(proc.stderr, 8000, err), daemon=True)
         drainer.start()
         try:
-            _converse(proc, job, run, skip, err)
+            _converse(proc, job, run, skip, err, judge)
         finally:
             procs = _descendants(proc.pid)  # the sandbox's processes, looked for again once it is gone
             try:
@@ -791,7 +887,7 @@ def _drain(stream, keep: int, sink: list) -> None:
         size += len(chunk)
 
 
-def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list) -> None:
+def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list, judge=None) -> None:
     data = pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL)
     try:
         proc.stdin.write(struct.pack(">Q", len(data)) + data)
@@ -804,7 +900,7 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
     buf = bytearray()
     # the harness answers "ready" within load_budget (it skips statements that load too slowly)
     deadline = time.monotonic() + load_budget(job.load_wall) + LOAD_MARGIN_S
-    hello = False
+    state = {"hello": False, "deadline": None}
     while True:
         frame = _next_frame(fd, buf, deadline)
         if frame is None:
@@ -813,40 +909,60 @@ def _converse(proc, job: SandboxJob, run: SandboxRun, skip: list[int], err: list
             raise GraderError(f"the sandbox {why} (exit status {proc.returncode}): "
                               + b"".join(err).decode(errors="replace")[-1500:].strip())
         header, blobs = frame
-        ev = header.get("event")
-        if ev == "hello":
-            hello = True
-            run.notes.update({str(k): str(v)[:300] for k, v in dict(header.get("notes", {})).items()})
-        elif not hello:
+        del frame
+        try:  # a large answer's turn (see BIG_FRAME_BYTES) ends with its frame, whatever happens
+            if _on_frame(header, blobs, job, run, skip, judge, by_id, state):
+                return
+        finally:
+            del blobs
+            if header.get("_big"):
+                _BIG_FRAME.release()
+        deadline = state["deadline"] or deadline
+        state["deadline"] = None
+
+
+def _on_frame(header: dict, blobs: list, job: SandboxJob, run: SandboxRun, skip: list[int], judge, by_id: dict,
+              state: dict) -> bool:
+    """Take one frame of the harness; True once it has finished. A new deadline goes to ``state``."""
+    ev = header.get("event")
+    if ev == "hello":
+        state["hello"] = True
+        run.notes.update({str(k): str(v)[:300] for k, v in dict(header.get("notes", {})).items()})
+    elif not state["hello"]:
+        raise GraderError("the sandbox broke its protocol")
+    elif ev == "load_error":
+        k = header.get("k")
+        if isinstance(k, int) and 0 <= k < len(job.statements):
+            run.load_errors.append((k, str(header.get("error", ""))[:400]))
+            if k not in skip:
+                skip.append(k)
+    elif ev == "ready":
+        state["deadline"] = time.monotonic() + (job.checks[0].wall + 10 if job.checks else 10)
+    elif ev == "check":
+        cid = header.get("id")
+        if cid not in by_id or cid in run.checks:
             raise GraderError("the sandbox broke its protocol")
-        elif ev == "load_error":
-            k = header.get("k")
-            if isinstance(k, int) and 0 <= k < len(job.statements):
-                run.load_errors.append((k, str(header.get("error", ""))[:400]))
-                if k not in skip:
-                    skip.append(k)
-        elif ev == "ready":
-            deadline = time.monotonic() + (job.checks[0].wall + 10 if job.checks else 10)
-        elif ev == "check":
-            cid = header.get("id")
-            if cid not in by_id or cid in run.checks:
-                raise GraderError("the sandbox broke its protocol")
-            c = by_id[cid]
-            status = str(header.get("status", ""))[:40]
-            answer = last_answer(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
-            calls = decode_answers(answer) if answer is not None else None
-            if calls is None:
-                run.checks[cid] = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb))
-            else:
-                run.checks[cid] = CheckRun(calls=calls)
-            nxt = next((x for x in job.checks if x.id not in run.checks), None)
-            deadline = time.monotonic() + (nxt.wall + 10 if nxt else 10)
-        elif ev == "finished":
-            return
+        c = by_id[cid]
+        status = str(header.get("status", ""))[:40]
+        answer = last_answer(blobs[0]) if status == "exit 0" and len(blobs) == 1 else None
+        calls = decode_answers(answer) if answer is not None else None
+        del answer, blobs[:]
+        cr = CheckRun(failure=_describe(status, c.wall, c.cpu, job.mem_mb)) if calls is None else CheckRun(calls=calls)
+        del calls
+        if judge is not None:  # judged now, then dropped: one check's answers at a time
+            judge(cid, cr)
+            cr = CheckRun(failure=cr.failure)
+        run.checks[cid] = cr
+        nxt = next((x for x in job.checks if x.id not in run.checks), None)
+        state["deadline"] = time.monotonic() + (nxt.wall + 10 if nxt else 10)
+    elif ev == "finished":
+        return True
+    return False
 
 
 def _next_frame(fd: int, buf: bytearray, deadline: float):
-    """Read one frame from the harness (the trusted zygote: still capped)."""
+    """Read one frame from the harness (the trusted zygote: still capped). Once its header is read,
+    the frame's bytes go straight into one buffer of the frame's size (no copy of a large answer)."""
     need = None
     while True:
         if len(buf) >= 4 and need is None:
@@ -864,13 +980,24 @@ def _next_frame(fd: int, buf: bytearray, deadline: float):
                 except (ValueError, KeyError, TypeError, RecursionError, OverflowError):
                     return None
                 need = 4 + n + sum(sizes)
+                if need > BIG_FRAME_BYTES:  # one large answer in this grader at a time, whatever --jobs
+                    if not _BIG_FRAME.acquire(timeout=max(0.0, deadline - time.monotonic())):
+                        return None
+                    header["_big"] = True
+                if len(buf) < need:  # the rest is read into the frame's own buffer
+                    whole = bytearray(need)
+                    whole[:len(buf)] = buf
+                    got = len(buf)
+                    del buf[:]
+                    if not _read_into(fd, memoryview(whole)[got:], deadline):
+                        if header.get("_big"):
+                            _BIG_FRAME.release()
+                        return None
+                    return _cut(header, whole, 4 + n, sizes)
         if need is not None and len(buf) >= need:
-            blobs, pos = [], 4 + n
-            for s in sizes:
-                blobs.append(bytes(buf[pos: pos + s]))
-                pos += s
+            whole = bytearray(buf[:need])
             del buf[:need]
-            return header, blobs
+            return _cut(header, whole, 4 + n, sizes)
         left = deadline - time.monotonic()
         if left <= 0 or not select.select([fd], [], [], left)[0]:
             return None
@@ -878,3 +1005,30 @@ def _next_frame(fd: int, buf: bytearray, deadline: float):
         if not chunk:
             return None
         buf += chunk
+
+
+#: a frame larger than this (the answers of one check) is read, decoded and judged by one thread of
+#: the grader at a time (:data:`_BIG_FRAME`): with --jobs 2, two answers just under the 64 MB cap
+#: made the grader's peak 2.6x the solutions' (291 MB against 113 MB, benchmarks/bench_grade.py)
+BIG_FRAME_BYTES = 8 * 2 ** 20
+_BIG_FRAME = threading.Semaphore(1)
+
+
+def _read_into(fd: int, view: memoryview, deadline: float) -> bool:
+    while len(view):
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            return False
+        n = os.readv(fd, [view])
+        if not n:
+            return False
+        view = view[n:]
+    return True
+
+
+def _cut(header: dict, whole: bytearray, pos: int, sizes: list) -> tuple[dict, list]:
+    view, blobs = memoryview(whole), []
+    for s in sizes:
+        blobs.append(view[pos: pos + s])
+        pos += s
+    return header, blobs

@@ -39,8 +39,9 @@ import struct
 
 #: x86-64 system-call numbers (arch/x86/entry/syscalls/syscall_64.tbl, Linux 6.x)
 SYSCALLS = {
-    "socket": 41, "connect": 42, "accept": 43, "sendto": 44, "bind": 49, "listen": 50, "socketpair": 53,
-    "ioctl": 16, "clone": 56, "fork": 57, "vfork": 58, "execve": 59, "kill": 62, "fcntl": 72, "ptrace": 101, "syslog": 103,
+    "ioctl": 16, "socket": 41, "connect": 42, "accept": 43, "sendto": 44, "bind": 49, "listen": 50,
+    "socketpair": 53, "clone": 56, "fork": 57, "vfork": 58, "execve": 59, "kill": 62, "fcntl": 72, "ptrace": 101,
+    "syslog": 103,
     "rt_sigqueueinfo": 129, "uselib": 134, "personality": 135, "mknod": 133, "modify_ldt": 154,
     "pivot_root": 155, "chroot": 161, "acct": 163, "settimeofday": 164, "mount": 165, "umount2": 166,
     "swapon": 167, "swapoff": 168, "reboot": 169, "iopl": 172, "ioperm": 173, "init_module": 175,
