@@ -46,7 +46,7 @@ def test_debian_numpy_grades_or_is_refused_at_start_with_the_reason(debian_numpy
         assert [(r["student"], r["total"]) for r in rows] == [("ada", "10")], rows
     else:  # refused before grading: no gradebook of "grader error", the library and the fix named
         assert not out.exists()
-        assert "cannot load inside the grading sandbox" in err and "libblas.so.3" in err, err
+        assert "inside the grading sandbox" in err and ("libblas.so.3" in err or "another major version" in err), err
         assert "Debian's python3-numpy" in err and "scripts/setup.sh" in err
     assert "not graded: grader error, rerun" not in err  # never a class of grader errors
 

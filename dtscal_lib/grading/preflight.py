@@ -128,7 +128,7 @@ def diagnose(f: dict, bwrap_said: str = "") -> list[Cause]:
     return out
 
 #: numpy imported and one BLAS call made (a 2x2 product): what every check needs
-PROBE = "import numpy; a = numpy.ones((2, 2)); print(float((a @ a)[0, 0]))"
+PROBE = "import numpy; a = numpy.ones((2, 2)); print(float((a @ a)[0, 0]), numpy.__version__)"
 PROBE_OUT = "2.0"
 
 _LOCK = threading.Lock()
@@ -144,6 +144,16 @@ def _reason(stderr: str) -> str:
     return lines[-1] if lines else "no output"
 
 
+def _grader_numpy_version() -> str:
+    import numpy
+
+    return numpy.__version__
+
+
+def _grader_numpy_major() -> str:
+    return _grader_numpy_version().split(".")[0]
+
+
 def check_numpy() -> None:
     """Refuse (:class:`DtscalError`) when numpy cannot load and multiply inside the sandbox; once per
     interpreter, numpy and sandbox mode in this process."""
@@ -156,17 +166,25 @@ def check_numpy() -> None:
     argv = sandbox.probe_argv(PROBE)
     try:
         run = subprocess.run(argv, capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
-        ok, why = run.returncode == 0 and run.stdout.strip() == PROBE_OUT, _reason(run.stderr)
+        out = run.stdout.split()
+        ok, why = run.returncode == 0 and out[:1] == [PROBE_OUT], _reason(run.stderr)
+        if ok and len(out) > 1 and out[1].split(".")[0] != _grader_numpy_major():
+            # the jobs and answers carry numpy arrays pickled by the grader's numpy: numpy 2 pickles name
+            # numpy._core, which numpy 1 cannot load (numpy 2.0 release notes, "numpy.core is now numpy._core")
+            ok, why = False, (f"its numpy {out[1]} cannot read the arrays the grader's numpy "
+                              f"{_grader_numpy_version()} sends (another major version)")
     except (OSError, subprocess.SubprocessError) as exc:
         ok, why = False, str(exc)
     if not ok:
         m = sandbox.manifest()
         exe, where = m.interpreter, m.trees.get("/sandbox/site/numpy", "numpy")
         debian = "/dist-packages/" in where
-        hint = ("This is Debian's python3-numpy, which finds BLAS through /etc/alternatives (libblas.so.3 -> "
-                "/etc/alternatives/libblas.so.3-<arch>), outside what the sandbox shows. " if debian else "")
+        hint = ("" if not debian else "This is Debian's python3-numpy, another numpy than the grader's. "
+                if "major version" in why else "This is Debian's python3-numpy, which finds BLAS through "
+                "/etc/alternatives (libblas.so.3 -> /etc/alternatives/libblas.so.3-<arch>), outside what the sandbox "
+                "shows. ")
         raise DtscalError(
-            f"not graded: numpy ({where}, run by {exe}) cannot load inside the grading sandbox "
+            f"not graded: numpy ({where}, run by {exe}) cannot load or cannot work inside the grading sandbox "
             f"({sandbox.mode()}): {why}. {hint}Every student would get 'grader error', so nothing was graded. "
             "Grade from the kit's own environment, whose numpy (from PyPI) carries its own OpenBLAS: "
             "bash scripts/setup.sh, then .venv/bin/dtscal grade ...")
