@@ -120,7 +120,7 @@ def write_bundle(out_zip, material_root=None, assignment: str | None = None, unc
     if out.suffix != ".zip":
         raise DtscalError(f"{out} should end in .zip (Gradescope takes a zip file)")
     out.parent.mkdir(parents=True, exist_ok=True)
-    from .command import UNCONFINED
+    from .preflight import UNCONFINED
 
     flag = (f"--assignment {assignment} " if assignment else "") + (f"{UNCONFINED} " if unconfined else "")
     with safe_write.output(out, what="Gradescope bundle", suffix=".part") as tmp, \
