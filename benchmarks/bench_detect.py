@@ -129,6 +129,37 @@ def part_real_timing(repeats: int) -> dict:
     out["ratio_wall"] = out["kit"]["wall_ms_median"] / out["opencv"]["wall_ms_median"]
     out["target_ratio"] = TARGET_REAL_RATIO
     out["meets_target"] = out["ratio_cpu"] <= TARGET_REAL_RATIO
+    out["kit_time_goes_to"] = _where_detection_time_goes(kit, files)
+    return out
+
+
+#: the steps of the kit's detector whose own share of the time is printed (dtscal_lib/detect/)
+DETECT_STEPS = ("board_regions", "_classic", "findChessboardCorners", "order_corners", "refine_corners_checked",
+                "cornerSubPix", "grid_residuals", "grid_disagreement", "_saddle_lattice", "to_gray")
+
+
+def _where_detection_time_goes(kit, files) -> dict:
+    """The kit's detection of every photograph under cProfile: cumulative ms per image of its main steps (the
+    share of each, so that a missed goal says where the time goes)."""
+    import cProfile
+    import pstats
+
+    import cv2
+
+    grays = [cv2.imread(str(f), cv2.IMREAD_GRAYSCALE) for f in files]
+    prof = cProfile.Profile()
+    prof.enable()
+    for g in grays:
+        kit(g)
+    prof.disable()
+    stats = pstats.Stats(prof).stats
+    total = sum(tt for (_, _, _), (_, _, tt, _, _) in stats.items())
+    out = {"total_ms_per_image": 1e3 * total / len(grays)}
+    for (_, _, name), (_, _, _, ct, _) in stats.items():
+        key = next((step for step in DETECT_STEPS if name == step or name.endswith(f".{step}>") or
+                    name == f"<built-in method cv2.{step}>"), None)
+        if key is not None:
+            out[key] = out.get(key, 0.0) + 1e3 * ct / len(grays)
     return out
 
 
@@ -142,6 +173,11 @@ def print_real_timing(r: dict) -> None:
               f"wall {v['wall_ms_median']:6.2f} ms")
     print(f"  kit / OpenCV: CPU {r['ratio_cpu']:.2f}x, wall {r['ratio_wall']:.2f}x "
           f"(target <= {r['target_ratio']:.2f}x: {'met' if r['meets_target'] else 'MISSED'})")
+    w = r.get("kit_time_goes_to")
+    if w and not r["meets_target"]:
+        steps = sorted(((k, v) for k, v in w.items() if k != "total_ms_per_image"), key=lambda kv: -kv[1])
+        print(f"  where the kit's time goes (cProfile, cumulative ms per image of {w['total_ms_per_image']:.1f}, "
+              "nested steps overlap): " + ", ".join(f"{k} {v:.1f}" for k, v in steps))
 
 
 def make_quality_set(renderer: FrameRenderer, n_boards: int, n_empty: int, seed: int = 7):

@@ -140,3 +140,31 @@ def test_notebook_06_tool_calibrates_the_dd24_frame(tmp_path, frame_dir):
                 assert (out / "camera_extrinsic" / "dronebot.yaml").exists(), said
         finally:
             tool.close()
+
+
+@pytest.mark.parametrize("fx_per_width,warned", [(0.45, True), (0.53, False), (0.644, False), (0.76, False),
+                                                 (0.85, True)])
+def test_dd24_files_across_the_fx_range(tmp_path, fx_per_width, warned):
+    """The DD24's own file (fx 154.59 px at 240 px, 0.644 of the width) with its focal lengths set across the
+    profile's range (limits.py dd24_fx_per_width: 20 % either way of it, 0.515-0.773): inside, loaded without a
+    word; outside, loaded with the one-line warning (issue 31: a shifted range went unnoticed, no file fell in
+    the gap). The expected side of each value is computed here from the real file, not from the kit's row."""
+    import warnings
+
+    from dtscal_lib import calib_files
+
+    real = calib_files.load_intrinsics(REF / "calibration-intrinsic-dd24.yaml")
+    assert abs(real.K[0, 0] / real.size[0] - 0.644) < 0.001
+    assert warned == (not 0.8 * 0.644 <= fx_per_width <= 1.2 * 0.644)
+    K = real.K.copy()
+    K[0, 0] = K[1, 1] = fx_per_width * real.size[0]
+    P = real.P.copy()
+    P[0, 0] = P[1, 1] = K[0, 0]
+    scaled = calib_files.IntrinsicCalibration(real.camera_name, real.width, real.height, K, real.distortion_model,
+                                              real.D, real.R, P)
+    path = calib_files.save_intrinsics(scaled, tmp_path, "dd24bot")
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        calib_files.load_intrinsics(path)
+    words = [str(w.message) for w in seen if issubclass(w.category, calib_files.CalibrationFileWarning)]
+    assert bool([w for w in words if "far outside a dd24's cameras" in w]) == warned, words
