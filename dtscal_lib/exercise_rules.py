@@ -443,7 +443,7 @@ def rules_markdown(notebook: str) -> str:
     lines = ["### The rules of the exercises (the self-check and the grader apply the same)", "",
              f"- **Imports** inside an exercise function: {allowed_words(notebook).replace('math', '`math`')}. "
              "No SciPy (`numpy.linalg` has `svd`, `eigh`, `norm`, `solve`, `cholesky`), no OpenCV "
-             "(`import cv2` at the top is for the figures)."]
+             "(`import cv2` at the top serves the notebook's drawings)."]
     if r.shortcuts:
         lines.append("- **Forbidden shortcuts**: " + "; ".join(
             f"`{f}` may not call " + " or ".join(f"`cv2.{c}`" for c in cv) for f, cv in r.shortcuts)
