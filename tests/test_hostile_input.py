@@ -168,6 +168,20 @@ def test_a_bz2_chunk_bomb_in_a_bag_without_index_is_refused_within_the_cap(tmp_p
     assert "declares" in errors if declared > 1 << 27 else "more than its declared" in errors
 
 
+def test_an_index_that_counts_more_messages_than_the_file_holds_is_not_believed(tmp_path, good_jpegs):
+    # found by hostile_fuzz.py: an indexed bag cut by one byte, an uncompressed chunk record appended; rosbags then
+    # reads a message count of 687,865,859 from the damaged index, and list(source) preallocated for it (MemoryError)
+    bag = hostile.write_bag(tmp_path / "base.bag", good_jpegs[:3]).read_bytes()[:-1]
+    path = tmp_path / "damaged.bag"
+    path.write_bytes(bag + hostile.chunk_record(hostile.bz2_of_zeros(8), "none", 0))
+    script = tmp_path / "walk.py"
+    script.write_text("import sys\nfrom dtscal_lib.sources import open_source\nsrc = open_source(sys.argv[1])\n"
+                      "frames = list(src)\nprint(len(src), sum(f.ok for f in frames))\n")
+    proc = hostile.run_capped([path], script=str(script), timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.split() == ["4", "3"]  # the three frames, then the damaged end
+
+
 def test_a_bag_that_is_only_a_chunk_bomb_is_refused_with_a_message(tmp_path):
     header = hostile._record({"op": b"\x03", "index_pos": (0).to_bytes(8, "little"),
                               "conn_count": bytes(4), "chunk_count": bytes(4)}, b" " * 4000)

@@ -102,6 +102,12 @@ def _check_bag_file(path: Path) -> None:
         )
 
 
+#: the smallest message record of a ROS 1 bag: header length (4) and data length (4), and the header's
+#: three fields, each a 4-byte length and ``name=value``: op (3 + 1), conn (5 + 4), time (5 + 8) bytes
+#: (ROS's Bag format 2.0, "Message data" record): an index counting more messages than this allows is damaged
+MIN_MESSAGE_RECORD_BYTES = 4 + 4 + (4 + 3 + 1) + (4 + 5 + 4) + (4 + 5 + 8)
+
+
 def read_bag_info(path: str | os.PathLike) -> BagInfo:
     """Topics, types and message counts of a bag; falls back to a sequential walk.
 
@@ -122,7 +128,9 @@ def read_bag_info(path: str | os.PathLike) -> BagInfo:
                 types = {normalize_msgtype(c.msgtype) for c in info.connections}
                 topics[topic] = types.pop() if len(types) == 1 else "(mixed types)"
                 counts[topic] = int(info.msgcount)
-            return BagInfo(topics, counts, None)
+            if sum(counts.values()) * MIN_MESSAGE_RECORD_BYTES <= path.stat().st_size:
+                return BagInfo(topics, counts, None)
+            # an index that counts more messages than the file can hold is damaged: count by walking
     except ReaderError:
         pass  # no usable index (cut short, recording killed): walk the file instead
     except Exception:  # noqa: BLE001 - rosbags raises struct/Key/Index errors on some damaged indexes
