@@ -282,9 +282,9 @@ def write_figure(comp: Comparison, path) -> None:
         ax.annotate(f"{v['diff_px']:.2f}", v["pixel"], color="white", fontsize=9, ha="center")
     ax.set_title(f"{comp.names[1]} vs {comp.names[0]}: max {comp.max_px:.2f} px, rotation {comp.rotation_deg:.3f} deg")
     fig.tight_layout()
-    ext = os.path.splitext(str(path))[1] or ".png"
-    with safe_write.output(path, what="comparison figure", suffix=ext) as tmp:
-        fig.savefig(tmp, dpi=90, format=ext.lstrip("."))
+    suffix = os.path.splitext(str(path))[1] or ".png"
+    with safe_write.output(path, what="comparison figure", suffix=suffix) as tmp:
+        fig.savefig(tmp, dpi=90, format=suffix.lstrip("."))
     plt.close(fig)
 
 

@@ -210,10 +210,6 @@ def _noskew(K):
     return K
 
 
-def _homog(H, pts):
-    return cv2.perspectiveTransform(np.asarray(pts, float).reshape(-1, 1, 2), np.asarray(H, float)).reshape(-1, 2)
-
-
 def _homog_undivided(H, pts):
     pts = np.asarray(pts, float)
     w = (np.asarray(H, float)[2, :2] @ pts.T + H[2, 2]).reshape(-1, 1)

@@ -746,9 +746,9 @@ def run_calls(statements: list[tuple[str, int]], checks: list, *, mem_mb: int = 
             time.sleep(RETRY_PAUSE_S * (attempt + 1))
         todo = [c for c in jobs if c.id not in run.checks]
     if todo:  # the checks answered before the failure travel with it (the caller keeps them)
-        exc = GraderError(f"{GRADER_ERROR} ({'; '.join(errors)[-600:]})")
-        exc.run = run
-        raise exc
+        failure = GraderError(f"{GRADER_ERROR} ({'; '.join(errors)[-600:]})")
+        failure.run = run  # type: ignore[attr-defined]
+        raise failure
     return run
 
 
