@@ -37,11 +37,14 @@ from bench_mrcal import BOARD, MRCAL_PYTHON, REAL, MrcalMissing, _clean_env, mrc
 from dtscal_lib import pipeline  # noqa: E402
 from dtscal_lib.boards import parse_board  # noqa: E402
 from dtscal_lib.calibration import calibrate  # noqa: E402
-from dtscal_lib.compare import PLACES, projection_difference  # noqa: E402
+from dtscal_lib.compare import PLACES, WITHIN_SIGMAS, projection_difference  # noqa: E402
 
 HELPER = HERE / "mrcal_diff_helper.py"
 #: issue 25's acceptance: the kit's and mrcal's projection differences agree within 10 %
 AGREE_REL = 0.10
+#: the files' sigma propagated by the kit and by mrcal's gradients: the same covariance and Jacobian, so equal
+#: to round-off (measured below 1e-9 on the left set's halves, ``--with-sigma``); bound 1e-6
+SIGMA_REL = 1e-6
 
 
 def corners(side: str):
@@ -103,6 +106,56 @@ def compare_pair(obj, img, size, split) -> dict:
     return {"views": [a_idx, b_idx], "kit": ks, "mrcal": ms, "rel": rel,
             "kit_rotation_deg": kit.rotation_deg, "grid_equal": bool(np.allclose(kit.pixels, np.asarray(m["q0"]))),
             "unprojectable": {"kit": int((kd < 0).sum()), "mrcal": int((md < 0).sum())}}
+
+
+def file_model(path) -> dict:
+    """A kit intrinsic file as an mrcal model (with its ``dtscal_uncertainty`` as ``sigma`` when it has one),
+    read with plain YAML, not with the kit's reader."""
+    import yaml
+
+    doc = yaml.safe_load(Path(path).read_text())
+    K, D = doc["camera_matrix"]["data"], doc["distortion_coefficients"]["data"]
+    m = {"lensmodel": "LENSMODEL_OPENCV5", "imagersize": [doc["image_width"], doc["image_height"]],
+         "intrinsics": [K[0], K[4], K[2], K[5], *D[:5]]}
+    u = doc.get("dtscal_uncertainty")
+    if u:
+        n = len(u["parameters"])
+        m["sigma"] = {"parameters": u["parameters"],
+                      "covariance": np.reshape(u["covariance"]["data"], (n, n)).tolist()}
+    return m
+
+
+def compare_files(pa, pb) -> dict:
+    """``dtscal compare A B`` on two files that carry their sigma, against mrcal's ``projection_diff`` with the
+    files' sigma propagated by mrcal's gradients (``mrcal_diff_helper.py``): the differences (centre, corners,
+    max, RMS), the combined sigma ``sqrt(sigma_A^2 + sigma_B^2)`` and the judgement (max ratio, within 2)."""
+    kit = projection_difference(str(pa), str(pb))
+    m = run_mrcal_diff([file_model(pa), file_model(pb)])
+    md = np.asarray(m["difflen"], dtype=float)
+    s0, s1 = (np.asarray(x, dtype=float) for x in m["sigma"])
+    comb = np.where((s0 >= 0) & (s1 >= 0), np.hypot(s0, s1), np.nan)
+    kd = np.where(np.isfinite(kit.diff), kit.diff, -1.0)
+    both = (md >= 0) & (kd >= 0)
+    ks, ms = summary(np.where(both, kd, -1)), summary(np.where(both, md, -1))
+    rel = {k: ks[k] / ms[k] - 1 for k in ks if np.isfinite(ks[k]) and np.isfinite(ms[k]) and ms[k] > 0}
+    ok = both & np.isfinite(comb) & np.isfinite(kit.sigma)
+    mrcal_ratio = float(np.max(md[ok] / comb[ok]))
+    return {"kit": ks, "mrcal": ms, "rel": rel, "grid_equal": bool(np.allclose(kit.pixels, np.asarray(m["q0"]))),
+            "sigma_rel": float(np.max(np.abs(kit.sigma[ok] / comb[ok] - 1))),
+            "kit_ratio": kit.max_ratio, "mrcal_ratio": mrcal_ratio, "kit_within": kit.within,
+            "mrcal_within": bool(mrcal_ratio <= WITHIN_SIGMAS), "kit_rotation_deg": kit.rotation_deg}
+
+
+def sigma_disagreements(c: dict) -> list[str]:
+    """What breaks between the kit's judgement of two files and mrcal's with the files' sigma."""
+    bad = disagreements(c)
+    if not c["sigma_rel"] <= SIGMA_REL:
+        bad.append(f"combined sigma: kit/mrcal - 1 up to {c['sigma_rel']:.2e}")
+    if abs(c["kit_ratio"] / c["mrcal_ratio"] - 1) > AGREE_REL:
+        bad.append(f"largest difference / sigma: kit {c['kit_ratio']:.4g}, mrcal {c['mrcal_ratio']:.4g}")
+    if c["kit_within"] != c["mrcal_within"]:
+        bad.append(f"within the uncertainty: kit {c['kit_within']}, mrcal {c['mrcal_within']}")
+    return bad
 
 
 def disagreements(c: dict) -> list[str]:
