@@ -103,10 +103,10 @@ class FileUncertainty:
             return worst_direction_sigma(J @ self.covariance @ J.transpose(0, 2, 1))
 
     def to_dict(self) -> dict:
-        from .calib_files import _plain
-
+        """The block as written (floats by ``repr``, so they read back exactly; nothing called back in
+        :mod:`~dtscal_lib.calib_files`, which writes it)."""
         n = len(self.names)
-        return {"about": ABOUT, "parameters": list(self.names), "at": [_plain(v) for v in self.at],
+        return {"about": ABOUT, "parameters": list(self.names), "at": [float(v) for v in self.at],
                 "covariance": {"rows": n, "cols": n, "data": [float(v) for v in self.covariance.ravel()]},
                 "noise_sigma_px": float(self.noise_sigma_px), "views": int(self.n_views), "model": self.model,
                 "method": self.method}
