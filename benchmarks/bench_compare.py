@@ -15,7 +15,12 @@ grid where both models unproject. Acceptance (issue 25): within 10 %.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_compare.py [--side left|right] [--splits N] [--json] [--check]
+    .venv/bin/python benchmarks/bench_compare.py [--side left|right] [--splits N] [--with-sigma] [--json] [--check]
+
+``--with-sigma`` (issue 31): the halves are written as the kit writes them, with their sigma
+(``dtscal_uncertainty``), and ``dtscal compare``'s judgement of the two files is checked against mrcal's
+``projection_diff`` with uncertainties, the files' sigma propagated by mrcal's gradients
+(:func:`compare_files`).
 """
 
 from __future__ import annotations
@@ -146,6 +151,22 @@ def compare_files(pa, pb) -> dict:
             "mrcal_within": bool(mrcal_ratio <= WITHIN_SIGMAS), "kit_rotation_deg": kit.rotation_deg}
 
 
+def files_pair(obj, img, size, split) -> dict:
+    """Two half-set calibrations written as the kit writes them (with their sigma), then :func:`compare_files`."""
+    import tempfile
+
+    from dtscal_lib import file_uncertainty
+    from dtscal_lib.calib_files import IntrinsicCalibration, save_intrinsics
+
+    with tempfile.TemporaryDirectory() as d:
+        paths = []
+        for name, idx in zip("ab", split):
+            r = calibrate([obj[i] for i in idx], [img[i] for i in idx], size)
+            paths.append(save_intrinsics(IntrinsicCalibration.from_camera(r.camera(), name), d, name,
+                                         uncertainty=file_uncertainty.from_result(r)))
+        return {"views": list(split), **compare_files(*paths)}
+
+
 def sigma_disagreements(c: dict) -> list[str]:
     """What breaks between the kit's judgement of two files and mrcal's with the files' sigma."""
     bad = disagreements(c)
@@ -170,6 +191,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--side", choices=["left", "right", "both"], default="both")
     ap.add_argument("--splits", type=int, default=0, help="seeded random splits besides even/odd")
+    ap.add_argument("--with-sigma", action="store_true",
+                    help="write each pair as kit files with their sigma (the kit's default model, plumb_bob without "
+                         "k3) and compare the files' judgement with mrcal's, the files' sigma in its weights")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--check", action="store_true", help="exit 1 when the kit and mrcal disagree by more than 10 %%")
     args = ap.parse_args(argv)
@@ -177,6 +201,17 @@ def main(argv=None) -> int:
     for side in (["left", "right"] if args.side == "both" else [args.side]):
         obj, img, size = corners(side)
         for seed in [None, *range(args.splits)]:
+            if args.with_sigma:
+                c = files_pair(obj, img, size, halves(len(obj), seed))
+                c["side"], c["seed"] = side, seed
+                out.append(c)
+                bad += [f"{side} split {seed}: {b}" for b in sigma_disagreements(c)]
+                if not args.json:
+                    print(f"{side} split {'even/odd' if seed is None else seed}: max kit {c['kit']['max']:.3f} px "
+                          f"mrcal {c['mrcal']['max']:.3f} px ({c['rel']['max']:+.3%}); difference / sigma kit "
+                          f"{c['kit_ratio']:.3f} mrcal {c['mrcal_ratio']:.3f}; sigma kit/mrcal - 1 <= "
+                          f"{c['sigma_rel']:.1e}; within: kit {c['kit_within']} mrcal {c['mrcal_within']}")
+                continue
             c = compare_pair(obj, img, size, halves(len(obj), seed))
             c["side"], c["seed"] = side, seed
             out.append(c)
