@@ -299,8 +299,9 @@ def write_figure(comp: Comparison, path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 5))
-    ext = [comp.pixels[..., 0].min(), comp.pixels[..., 0].max(), comp.pixels[..., 1].max(), comp.pixels[..., 1].min()]
-    im = ax.imshow(comp.diff, extent=ext, cmap="viridis", vmin=0, vmax=np.nanpercentile(comp.diff, 99))
+    extent = (float(comp.pixels[..., 0].min()), float(comp.pixels[..., 0].max()), float(comp.pixels[..., 1].max()),
+              float(comp.pixels[..., 1].min()))
+    im = ax.imshow(comp.diff, extent=extent, cmap="viridis", vmin=0, vmax=np.nanpercentile(comp.diff, 99))
     fig.colorbar(im, ax=ax, label="projection difference (px)")
     for name, v in comp.at.items():
         ax.annotate(f"{v['diff_px']:.2f}", v["pixel"], color="white", fontsize=9, ha="center")
