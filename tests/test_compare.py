@@ -395,3 +395,31 @@ def test_compare_of_two_files_with_their_sigma_agrees_with_mrcal(bench, sigma_fi
     assert c["grid_equal"] and c["kit_within"] is True
     assert bench.sigma_disagreements(c) == [], c
     assert bench.SIGMA_REL == 1e-6
+
+
+def test_a_malformed_sigma_block_is_ignored_and_named(sigma_files, tmp_path):
+    """A block whose covariance does not fit its parameters, is not symmetric positive definite, or is no mapping:
+    the file still loads and compares; its σ is ignored, and the reason names the block."""
+    import yaml
+
+    from dtscal_lib import file_uncertainty
+    from dtscal_lib.calib_files import _dump, load_intrinsics
+
+    a, b = sigma_files
+    doc = yaml.safe_load(b.read_text())
+    block = doc[file_uncertainty.KEY]
+    n = len(block["parameters"])
+    C = np.reshape(block["covariance"]["data"], (n, n))
+    bad_cov = C.copy()
+    bad_cov[0, 0] = -1.0
+    variants = {"short": {**block, "covariance": {**block["covariance"], "data": block["covariance"]["data"][:-1]}},
+                "indefinite": {**block, "covariance": {**block["covariance"], "data": bad_cov.ravel().tolist()}},
+                "no mapping": "sigma: 2 px"}
+    for name, variant in variants.items():
+        p = tmp_path / f"{name.replace(' ', '_')}.yaml"
+        p.write_text(_dump({**doc, file_uncertainty.KEY: variant}))
+        assert load_intrinsics(p) == load_intrinsics(b), name
+        unc, why = file_uncertainty.load(p)
+        assert unc is None and "block is malformed" in why and file_uncertainty.KEY in why, (name, why)
+        c = projection_difference(str(p), str(p))
+        assert c.max_px < 1e-6 and len(c.unknown) == 2, name
