@@ -15,7 +15,12 @@ grid where both models unproject. Acceptance (issue 25): within 10 %.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_compare.py [--side left|right] [--splits N] [--json] [--check]
+    .venv/bin/python benchmarks/bench_compare.py [--side left|right] [--splits N] [--with-sigma] [--json] [--check]
+
+``--with-sigma`` (issue 31): the halves are written as the kit writes them, with their sigma
+(``dtscal_uncertainty``), and ``dtscal compare``'s judgement of the two files is checked against mrcal's
+``projection_diff`` with uncertainties, the files' sigma propagated by mrcal's gradients
+(:func:`compare_files`).
 """
 
 from __future__ import annotations
@@ -37,11 +42,14 @@ from bench_mrcal import BOARD, MRCAL_PYTHON, REAL, MrcalMissing, _clean_env, mrc
 from dtscal_lib import pipeline  # noqa: E402
 from dtscal_lib.boards import parse_board  # noqa: E402
 from dtscal_lib.calibration import calibrate  # noqa: E402
-from dtscal_lib.compare import PLACES, projection_difference  # noqa: E402
+from dtscal_lib.compare import PLACES, WITHIN_SIGMAS, projection_difference  # noqa: E402
 
 HELPER = HERE / "mrcal_diff_helper.py"
 #: issue 25's acceptance: the kit's and mrcal's projection differences agree within 10 %
 AGREE_REL = 0.10
+#: the files' sigma propagated by the kit and by mrcal's gradients: the same covariance and Jacobian, so equal
+#: to round-off (measured below 1e-9 on the left set's halves, ``--with-sigma``); bound 1e-6
+SIGMA_REL = 1e-6
 
 
 def corners(side: str):
@@ -105,6 +113,72 @@ def compare_pair(obj, img, size, split) -> dict:
             "unprojectable": {"kit": int((kd < 0).sum()), "mrcal": int((md < 0).sum())}}
 
 
+def file_model(path) -> dict:
+    """A kit intrinsic file as an mrcal model (with its ``dtscal_uncertainty`` as ``sigma`` when it has one),
+    read with plain YAML, not with the kit's reader."""
+    import yaml
+
+    doc = yaml.safe_load(Path(path).read_text())
+    K, D = doc["camera_matrix"]["data"], doc["distortion_coefficients"]["data"]
+    m = {"lensmodel": "LENSMODEL_OPENCV5", "imagersize": [doc["image_width"], doc["image_height"]],
+         "intrinsics": [K[0], K[4], K[2], K[5], *D[:5]]}
+    u = doc.get("dtscal_uncertainty")
+    if u:
+        n = len(u["parameters"])
+        m["sigma"] = {"parameters": u["parameters"],
+                      "covariance": np.reshape(u["covariance"]["data"], (n, n)).tolist()}
+    return m
+
+
+def compare_files(pa, pb) -> dict:
+    """``dtscal compare A B`` on two files that carry their sigma, against mrcal's ``projection_diff`` with the
+    files' sigma propagated by mrcal's gradients (``mrcal_diff_helper.py``): the differences (centre, corners,
+    max, RMS), the combined sigma ``sqrt(sigma_A^2 + sigma_B^2)`` and the judgement (max ratio, within 2)."""
+    kit = projection_difference(str(pa), str(pb))
+    m = run_mrcal_diff([file_model(pa), file_model(pb)])
+    md = np.asarray(m["difflen"], dtype=float)
+    s0, s1 = (np.asarray(x, dtype=float) for x in m["sigma"])
+    comb = np.where((s0 >= 0) & (s1 >= 0), np.hypot(s0, s1), np.nan)
+    kd = np.where(np.isfinite(kit.diff), kit.diff, -1.0)
+    both = (md >= 0) & (kd >= 0)
+    ks, ms = summary(np.where(both, kd, -1)), summary(np.where(both, md, -1))
+    rel = {k: ks[k] / ms[k] - 1 for k in ks if np.isfinite(ks[k]) and np.isfinite(ms[k]) and ms[k] > 0}
+    ok = both & np.isfinite(comb) & np.isfinite(kit.sigma)
+    mrcal_ratio = float(np.max(md[ok] / comb[ok]))
+    return {"kit": ks, "mrcal": ms, "rel": rel, "grid_equal": bool(np.allclose(kit.pixels, np.asarray(m["q0"]))),
+            "sigma_rel": float(np.max(np.abs(kit.sigma[ok] / comb[ok] - 1))),
+            "kit_ratio": kit.max_ratio, "mrcal_ratio": mrcal_ratio, "kit_within": kit.within,
+            "mrcal_within": bool(mrcal_ratio <= WITHIN_SIGMAS), "kit_rotation_deg": kit.rotation_deg}
+
+
+def files_pair(obj, img, size, split) -> dict:
+    """Two half-set calibrations written as the kit writes them (with their sigma), then :func:`compare_files`."""
+    import tempfile
+
+    from dtscal_lib import file_uncertainty
+    from dtscal_lib.calib_files import IntrinsicCalibration, save_intrinsics
+
+    with tempfile.TemporaryDirectory() as d:
+        paths = []
+        for name, idx in zip("ab", split):
+            r = calibrate([obj[i] for i in idx], [img[i] for i in idx], size)
+            paths.append(save_intrinsics(IntrinsicCalibration.from_camera(r.camera(), name), d, name,
+                                         uncertainty=file_uncertainty.from_result(r)))
+        return {"views": list(split), **compare_files(*paths)}
+
+
+def sigma_disagreements(c: dict) -> list[str]:
+    """What breaks between the kit's judgement of two files and mrcal's with the files' sigma."""
+    bad = disagreements(c)
+    if not c["sigma_rel"] <= SIGMA_REL:
+        bad.append(f"combined sigma: kit/mrcal - 1 up to {c['sigma_rel']:.2e}")
+    if abs(c["kit_ratio"] / c["mrcal_ratio"] - 1) > AGREE_REL:
+        bad.append(f"largest difference / sigma: kit {c['kit_ratio']:.4g}, mrcal {c['mrcal_ratio']:.4g}")
+    if c["kit_within"] != c["mrcal_within"]:
+        bad.append(f"within the uncertainty: kit {c['kit_within']}, mrcal {c['mrcal_within']}")
+    return bad
+
+
 def disagreements(c: dict) -> list[str]:
     bad = [f"{k}: kit {c['kit'][k]:.4g} px, mrcal {c['mrcal'][k]:.4g} px ({v:+.1%})"
            for k, v in c["rel"].items() if abs(v) > AGREE_REL]
@@ -117,6 +191,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--side", choices=["left", "right", "both"], default="both")
     ap.add_argument("--splits", type=int, default=0, help="seeded random splits besides even/odd")
+    ap.add_argument("--with-sigma", action="store_true",
+                    help="write each pair as kit files with their sigma (the kit's default model, plumb_bob without "
+                         "k3) and compare the files' judgement with mrcal's, the files' sigma in its weights")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--check", action="store_true", help="exit 1 when the kit and mrcal disagree by more than 10 %%")
     args = ap.parse_args(argv)
@@ -124,6 +201,17 @@ def main(argv=None) -> int:
     for side in (["left", "right"] if args.side == "both" else [args.side]):
         obj, img, size = corners(side)
         for seed in [None, *range(args.splits)]:
+            if args.with_sigma:
+                c = files_pair(obj, img, size, halves(len(obj), seed))
+                c["side"], c["seed"] = side, seed
+                out.append(c)
+                bad += [f"{side} split {seed}: {b}" for b in sigma_disagreements(c)]
+                if not args.json:
+                    print(f"{side} split {'even/odd' if seed is None else seed}: max kit {c['kit']['max']:.3f} px "
+                          f"mrcal {c['mrcal']['max']:.3f} px ({c['rel']['max']:+.3%}); difference / sigma kit "
+                          f"{c['kit_ratio']:.3f} mrcal {c['mrcal_ratio']:.3f}; sigma kit/mrcal - 1 <= "
+                          f"{c['sigma_rel']:.1e}; within: kit {c['kit_within']} mrcal {c['mrcal_within']}")
+                continue
             c = compare_pair(obj, img, size, halves(len(obj), seed))
             c["side"], c["seed"] = side, seed
             out.append(c)

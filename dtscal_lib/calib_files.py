@@ -663,16 +663,27 @@ def _target(path: Path, rejected: bool) -> Path:
     return path.with_name(path.stem + REJECTED_SUFFIX + path.suffix) if rejected else path
 
 
-def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str, *, rejected: bool = False) -> Path:
+def save_intrinsics(calib: IntrinsicCalibration, out_dir, robot: str, *, rejected: bool = False,
+                    uncertainty=None) -> Path:
     """Write ``out_dir/camera_intrinsic/<robot>.yaml`` atomically (previous one kept as ``.bak``).
 
     Refuses ``robot == "default"``: the factory file is never overwritten. ``rejected``
-    writes ``<robot>.rejected.yaml`` instead, leaving ``<robot>.yaml`` alone.
+    writes ``<robot>.rejected.yaml`` instead, leaving ``<robot>.yaml`` alone. ``uncertainty`` (a
+    :class:`~dtscal_lib.file_uncertainty.FileUncertainty` of this calibration) is appended as the extra key
+    ``dtscal_uncertainty``, which ROS's and Duckietown's readers ignore; without it the file is exactly ROS's.
     """
     check_robot_name(robot)
     if not isinstance(calib, IntrinsicCalibration):
         raise CalibrationFileError(f"save_intrinsics needs an IntrinsicCalibration, got {type(calib).__name__}")
-    return _write(_target(intrinsic_path(out_dir, robot), rejected), calib.to_dict())
+    doc = calib.to_dict()
+    if uncertainty is not None:
+        from .file_uncertainty import KEY
+
+        off = uncertainty.mismatch(calib)
+        if off:
+            raise CalibrationFileError(f"the uncertainty given does not belong to this calibration: {off}")
+        doc[KEY] = uncertainty.to_dict()
+    return _write(_target(intrinsic_path(out_dir, robot), rejected), doc)
 
 
 def save_extrinsics(H, out_dir, robot: str, *, rejected: bool = False, corrupt_rule: bool = True) -> Path:

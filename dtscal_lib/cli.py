@@ -223,11 +223,11 @@ def cmd_calibrate_extrinsics(args) -> int:
 
 def cmd_compare(args) -> int:
     """``dtscal compare A.yaml B.yaml``: mrcal's projection difference of B against A (dtscal_lib.compare)."""
-    from .calib_files import load_intrinsics
-    from .compare import PLACES, projection_difference, write_figure
+    from .compare import PLACES, WITHIN_SIGMAS, projection_difference, write_figure
 
-    a, b = load_intrinsics(args.a), load_intrinsics(args.b)
-    comp = projection_difference(a, b, gridn_width=args.gridn, names=(str(args.a), str(args.b)))
+    # the paths, not their content: a file the kit wrote carries its uncertainty (dtscal_lib.file_uncertainty)
+    comp = projection_difference(args.a, args.b, gridn_width=args.gridn, names=(str(args.a), str(args.b)))
+    a, b = comp.cameras
     figure = None
     if args.report:
         out = Path(args.report)
@@ -241,15 +241,23 @@ def cmd_compare(args) -> int:
     if args.json:
         _print_json({**comp.to_dict(), "figure": str(figure) if figure else None})
         return 0
-    print(f"{args.b} against {args.a} ({a.model} / {b.model}, {a.width}x{a.height}): after a rotation of "
-          f"{comp.rotation_deg:.3f} deg (fitted within {comp.focus_radius:.0f} px of the centre, as mrcal does)")
+    where = ("over the whole image weighted by 1/(sigma_A sigma_B)^2" if comp.focus_radius == float("inf")
+             else f"within {comp.focus_radius:.0f} px of the centre")
+    print(f"{args.b} against {args.a} ({a.model} / {b.model}, {a.size[0]}x{a.size[1]}): after a rotation of "
+          f"{comp.rotation_deg:.3f} deg (fitted {where}, as mrcal does)")
     print(f"  max {comp.max_px:.3f} px, RMS {comp.rms_px:.3f} px over a {comp.diff.shape[1]}x{comp.diff.shape[0]} grid"
           + (f"; {comp.n_unprojectable} grid points cannot be unprojected by a model" if comp.n_unprojectable else ""))
     for name in PLACES:
         v = comp.at[name]
         print(f"  {name:12s} ({v['pixel'][0]:6.1f}, {v['pixel'][1]:6.1f}): {v['diff_px']:.3f} px")
-    print("  (a ROS calibration file carries no uncertainty: compare with the calibrations' own sigma in "
-          "notebook 06 or with calibrate-intrinsics --cross-validate)")
+    if comp.within is None:
+        print("  not judged against their uncertainty: " + "; ".join(comp.unknown)
+              + " (compare with the calibrations' own sigma in notebook 06 or with calibrate-intrinsics "
+                "--cross-validate)")
+    else:
+        print(f"  {'within' if comp.within else 'NOT within'} their uncertainty: at most {comp.max_ratio:.2f} "
+              f"times the combined 1-sigma sqrt(sigma_A^2 + sigma_B^2) (limit {WITHIN_SIGMAS:g})"
+              + (f"; judged against one file's sigma only: {'; '.join(comp.unknown)}" if comp.unknown else ""))
     if figure:
         print(f"wrote {figure}")
     return 0

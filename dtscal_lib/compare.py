@@ -20,7 +20,8 @@ through their intrinsics and the one rotation. Where a model cannot unproject a 
 folds over near a corner) the difference is NaN there and counted.
 
 The difference is judged against the calibrations' own uncertainty when known (a
-:class:`~dtscal_lib.calibration.CalibrationResult` carries it; a ROS file has no field for it): the
+:class:`~dtscal_lib.calibration.CalibrationResult` carries it, and so does a file the kit wrote, in its extra key
+``dtscal_uncertainty``, :mod:`dtscal_lib.file_uncertainty`; a ROS file has no field for it): the
 difference of two independent calibrations has a 1-sigma spread of ``sqrt(sigma_A^2 + sigma_B^2)``
 per pixel (worst direction, :func:`dtscal_lib.quality.projection_uncertainty` at infinity).
 """
@@ -134,6 +135,10 @@ class Comparison:
     sigma: np.ndarray | None = None
     names: tuple[str, str] = ("A", "B")
     at: dict = field(default_factory=dict)
+    #: why a calibration's uncertainty is not known (one sentence each; empty when both are)
+    unknown: list = field(default_factory=list)
+    #: the two cameras compared (A, B)
+    cameras: tuple = ()
 
     def __post_init__(self):
         h, w = self.diff.shape
@@ -186,7 +191,9 @@ class Comparison:
         if self.n_unprojectable:
             text += f" (where both can unproject; {self.n_unprojectable} grid points cannot)"
         if self.within is None:
-            return text + f" (RMS {self.rms_px:.1f} px; no uncertainty known to judge it against)"
+            why = "; ".join(self.unknown)
+            return text + f" (RMS {self.rms_px:.1f} px; no uncertainty known to judge it against" + \
+                (f": {why})" if why else ")")
         if self.within:
             return text + ", within its uncertainty: COMMIT changes little"
         return (text + f", {self.max_ratio:.1f}x its uncertainty: COMMIT changes what the robot sees; "
@@ -197,15 +204,27 @@ class Comparison:
                 "rotation_deg": self.rotation_deg, "focus_radius": self.focus_radius,
                 "grid": [int(self.diff.shape[1]), int(self.diff.shape[0])], "unprojectable": self.n_unprojectable,
                 "at": self.at, "max_ratio": self.max_ratio, "within_uncertainty": self.within,
-                "within_sigmas": WITHIN_SIGMAS}
+                "within_sigmas": WITHIN_SIGMAS, "uncertainty_unknown": list(self.unknown)}
 
 
-def _sigma_of(source, pixels: np.ndarray) -> np.ndarray | None:
-    """Worst-direction 1-sigma projection uncertainty at ``pixels`` (points at infinity), or None."""
+def _sigma_of(source, pixels: np.ndarray, camera: CameraModel | None = None,
+              unknown: list | None = None) -> np.ndarray | None:
+    """Worst-direction 1-sigma projection uncertainty at ``pixels`` (points at infinity), or None (and the
+    sentence why appended to ``unknown``). ``source`` a calibration result, a callable, or the path of a file
+    (its ``dtscal_uncertainty``; ``camera`` its content)."""
     if source is None:
         return None
     if callable(source) and not hasattr(source, "camera"):
         return np.asarray(source(pixels), dtype=np.float64)
+    if isinstance(source, (str, os.PathLike)):
+        from .file_uncertainty import load
+
+        unc, why = load(source, camera)
+        if unc is None:
+            if unknown is not None:
+                unknown.append(why)
+            return None
+        return unc.projection_sigma(camera if camera is not None else as_camera(source), pixels)
     if hasattr(source, "normal_blocks") and getattr(source, "object_points", None):
         from .quality import projection_uncertainty, worst_direction_sigma
 
@@ -217,6 +236,9 @@ def _sigma_of(source, pixels: np.ndarray) -> np.ndarray | None:
         cov = (source.normal_blocks(), source.intrinsic_covariance())
         return worst_direction_sigma(projection_uncertainty(source, pixels, distance=np.inf, cov=cov,
                                                             dist_idx=source.dist_indices))
+    if unknown is not None:
+        unknown.append(f"{getattr(source, 'camera_name', type(source).__name__)} was given without its file or "
+                       "views, so its uncertainty is not known")
     return None
 
 
@@ -225,7 +247,8 @@ def projection_difference(a, b, *, gridn_width: int = GRIDN_WIDTH, gridn_height:
                           names: tuple[str, str] = ("A", "B")) -> Comparison:
     """Compare calibration ``b`` with ``a`` (each a camera, a calibration result or a file path).
 
-    With ``uncertainty`` and ``a`` and ``b`` calibration results that carry their views, the rotation is
+    With ``uncertainty`` and ``a`` and ``b`` calibration results that carry their views, or paths of files that
+    carry their σ (:mod:`dtscal_lib.file_uncertainty`), the rotation is
     fitted over the whole image weighted by ``1 / (sigma_a sigma_b)^2`` (mrcal's default) and the difference
     is judged against ``sqrt(sigma_a^2 + sigma_b^2)``; with one of them a result and the other a file, against
     the result's own sigma (the file's taken as equal to it in the weights); with neither, the fit uses the
@@ -238,8 +261,9 @@ def projection_difference(a, b, *, gridn_width: int = GRIDN_WIDTH, gridn_height:
     q0 = grid(ca.size, gridn_width, gridn_height)
     flat = q0.reshape(-1, 2)
     v0, v1 = unproject(ca, flat), unproject(cb, flat)
-    sa = _sigma_of(a, flat) if uncertainty else None
-    sb = _sigma_of(b, flat) if uncertainty else None
+    unknown: list[str] = []
+    sa = _sigma_of(a, flat, ca, unknown) if uncertainty else None
+    sb = _sigma_of(b, flat, cb, unknown) if uncertainty else None
     w, h = ca.size
     centre = np.array([(w - 1) / 2, (h - 1) / 2])
     if sa is not None or sb is not None:
@@ -264,7 +288,7 @@ def projection_difference(a, b, *, gridn_width: int = GRIDN_WIDTH, gridn_height:
     # none: the difference is then judged against the new calibration's own uncertainty)
     known = [x for x in (sa, sb) if x is not None]
     sigma = np.sqrt(sum(x ** 2 for x in known)).reshape(q0.shape[:2]) if known else None
-    return Comparison(q0, diff, R, radius, sigma, names)
+    return Comparison(q0, diff, R, radius, sigma, names, unknown=unknown, cameras=(ca, cb))
 
 
 def write_figure(comp: Comparison, path) -> None:
@@ -275,8 +299,9 @@ def write_figure(comp: Comparison, path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 5))
-    ext = [comp.pixels[..., 0].min(), comp.pixels[..., 0].max(), comp.pixels[..., 1].max(), comp.pixels[..., 1].min()]
-    im = ax.imshow(comp.diff, extent=ext, cmap="viridis", vmin=0, vmax=np.nanpercentile(comp.diff, 99))
+    extent = (float(comp.pixels[..., 0].min()), float(comp.pixels[..., 0].max()), float(comp.pixels[..., 1].max()),
+              float(comp.pixels[..., 1].min()))
+    im = ax.imshow(comp.diff, extent=extent, cmap="viridis", vmin=0, vmax=np.nanpercentile(comp.diff, 99))
     fig.colorbar(im, ax=ax, label="projection difference (px)")
     for name, v in comp.at.items():
         ax.annotate(f"{v['diff_px']:.2f}", v["pixel"], color="white", fontsize=9, ha="center")

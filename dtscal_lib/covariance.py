@@ -64,7 +64,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["NormalBlocks", "honest_intrinsic_covariance", "projection_covariance", "rodrigues",
-           "robust_intrinsic_covariance", "MIN_ROBUST_VIEWS", "METHOD_ROBUST", "METHOD_NOISE_MODEL"]
+           "robust_intrinsic_covariance", "ray_rotation_covariance", "MIN_ROBUST_VIEWS", "METHOD_ROBUST",
+           "METHOD_NOISE_MODEL"]
 
 #: fewer views than this: the noise model alone (leaving one of 3 views out leaves too few for Zhang's method).
 #: From 4 views on the sandwich is used although a spread over V views is itself known only to about
@@ -200,6 +201,17 @@ def projection_covariance(blocks: NormalBlocks, cov_intrinsics: np.ndarray, dq_d
     tvecs : (V, 3) board translations; ``None`` for points at infinity (directions: the translations
         do not move them)
     """
+    LK, NK, LCL, LCN, NCN = _pose_sums(blocks, omegas, tvecs)
+    X = _skew_matrices(np.asarray(P, dtype=np.float64))  # (M, 3, 3)
+    GW = dq_dintr - dq_dP @ (X @ LK + NK)
+    XLCN = X @ LCN
+    pose3 = X @ LCL @ X.transpose(0, 2, 1) + XLCN + XLCN.transpose(0, 2, 1) + NCN  # (M, 3, 3)
+    return GW @ cov_intrinsics @ GW.transpose(0, 2, 1) + blocks.sigma2 * (dq_dP @ pose3 @ dq_dP.transpose(0, 2, 1))
+
+
+def _pose_sums(blocks: NormalBlocks, omegas: np.ndarray, tvecs: np.ndarray | None):
+    """The sums over the views of :func:`projection_covariance`: ``L K``, ``N K`` (3, n) and ``L C^-1 L^T``,
+    ``L C^-1 N^T``, ``N C^-1 N^T`` (3, 3), each divided by ``V`` per pose Jacobian."""
     V = blocks.n_views
     Kc = blocks.pose_coupling()  # (V, 6, n)
     Cinv = np.linalg.inv(blocks.C)
@@ -214,11 +226,28 @@ def projection_covariance(blocks: NormalBlocks, cov_intrinsics: np.ndarray, dq_d
     LCL = (LC @ L.transpose(0, 2, 1)).sum(axis=0) / V ** 2
     LCN = (LC @ N.transpose(0, 2, 1)).sum(axis=0) / V ** 2
     NCN = (NC @ N.transpose(0, 2, 1)).sum(axis=0) / V ** 2
-    X = _skew_matrices(np.asarray(P, dtype=np.float64))  # (M, 3, 3)
-    GW = dq_dintr - dq_dP @ (X @ LK + NK)
-    XLCN = X @ LCN
-    pose3 = X @ LCL @ X.transpose(0, 2, 1) + XLCN + XLCN.transpose(0, 2, 1) + NCN  # (M, 3, 3)
-    return GW @ cov_intrinsics @ GW.transpose(0, 2, 1) + blocks.sigma2 * (dq_dP @ pose3 @ dq_dP.transpose(0, 2, 1))
+    return LK, NK, LCL, LCN, NCN
+
+
+def ray_rotation_covariance(blocks: NormalBlocks, cov_intrinsics: np.ndarray, omegas: np.ndarray) -> np.ndarray:
+    """(n + 3, n + 3) joint covariance of the intrinsics and of a small rotation ``r`` of the camera's rays
+    (``v -> v + r x v``) that carries :func:`projection_covariance` at infinity in ``n + 3`` numbers.
+
+    At infinity the poses move a projection only through the mean rotation of the boards' frames,
+    ``dP = [P]_x dw`` with ``dw = -L K dI + xi``, ``cov(xi) = sigma^2 L C^-1 L^T`` (the sums of
+    :func:`_pose_sums`). With ``r = -dw``, the Jacobian ``J = [dq/dI, -dq/dP [v]_x]`` of a projection of the
+    ray ``v`` and this covariance give ``J cov J^T`` equal to :func:`projection_covariance` with
+    ``tvecs=None``: what a calibration file needs to carry for the projection uncertainty of directions
+    (:mod:`dtscal_lib.file_uncertainty`), without its views.
+    """
+    LK, _, LCL, _, _ = _pose_sums(blocks, omegas, None)
+    n = len(cov_intrinsics)
+    out = np.zeros((n + 3, n + 3))
+    out[:n, :n] = cov_intrinsics
+    out[n:, :n] = LK @ cov_intrinsics
+    out[:n, n:] = out[n:, :n].T
+    out[n:, n:] = LK @ cov_intrinsics @ LK.T + blocks.sigma2 * LCL
+    return 0.5 * (out + out.T)
 
 
 # --------------------------------------------------------------------------- rotations

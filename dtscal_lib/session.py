@@ -637,8 +637,20 @@ class IntrinsicSession:
         robot, refusals = _gate(self, writing=out is not None, keep_anyway=keep_anyway)
         if out is None:
             return None
-        self.path = calib_files.save_intrinsics(self.calibration(), out, robot, rejected=bool(refusals))
+        self.path = calib_files.save_intrinsics(self.calibration(), out, robot, rejected=bool(refusals),
+                                                uncertainty=self.file_uncertainty())
         return self.path
+
+    def file_uncertainty(self):
+        """The σ the written file carries (:mod:`dtscal_lib.file_uncertainty`); None for OpenCV's models, or
+        when it cannot be computed (the file is then written without it, as ROS writes it)."""
+        from . import file_uncertainty
+
+        try:
+            unc = file_uncertainty.from_result(self.result)
+        except (DtscalError, np.linalg.LinAlgError):
+            return None
+        return None if unc is None or unc.mismatch(self.calibration()) else unc
 
     def commit(self, *, master_uri: str | None = None, timeout: float | None = None, dtps=None) -> str:
         """Send the calibration to the robot (the written file, or a temporary one): over DTPS to its key-value

@@ -167,12 +167,18 @@ def projection_uncertainty(result, pixels, *, distance: float | None = None, cov
     P = ray if at_infinity else distance * ray
     _, dqdP, dqdI = _projection_jacobian(P, result.K, result.dist, result.skew,
                                           _dist_idx(result) if dist_idx is None else dist_idx)
-    R0, dR0 = rodrigues(result.rvecs)
-    W = np.einsum("vkij,vlj->vkil", dR0, R0)  # dR/dr_k R^T, a cross-product matrix [w_k]_x
-    omegas = np.stack([W[:, :, 2, 1], W[:, :, 0, 2], W[:, :, 1, 0]], axis=1)  # (V, 3 axis, 3 k)
+    omegas = pose_omegas(result.rvecs)
     with np.errstate(invalid="ignore"):  # NaN rays (a lens model that cannot be inverted) stay NaN
         return projection_covariance(blocks, cov_i, dqdI, dqdP, P, omegas,
                                      None if at_infinity else np.asarray(result.tvecs, dtype=np.float64))
+
+
+def pose_omegas(rvecs) -> np.ndarray:
+    """``W_v`` (V, 3, 3) of :func:`~dtscal_lib.covariance.projection_covariance`: column k the axis of the
+    cross-product matrix ``dR_v/dr_k R_v^T`` of each board's rotation."""
+    R0, dR0 = rodrigues(rvecs)
+    W = np.einsum("vkij,vlj->vkil", dR0, R0)  # dR/dr_k R^T, a cross-product matrix [w_k]_x
+    return np.stack([W[:, :, 2, 1], W[:, :, 0, 2], W[:, :, 1, 0]], axis=1)  # (V, 3 axis, 3 k)
 
 
 def worst_direction_sigma(cov: np.ndarray) -> np.ndarray:

@@ -158,8 +158,8 @@ DETECT = {"detect", "detect.classic", "detect.frame", "detect.grid", "detect.lat
           "detect.saddles"}
 AREAS = {"detect": DETECT | {"coverage", "boards"},
          "calibration": {"calibration", "closed_form", "lsq", "result", "camera", "ui.solver"},
-         "judge": {"plausibility", "quality", "ground", "report"}, "files": {"calib_files", "safe_yaml"},
-         "robot": {"robot"}}
+         "judge": {"plausibility", "quality", "ground", "report"},
+         "files": {"calib_files", "safe_yaml", "file_uncertainty"}, "robot": {"robot"}}
 #: the steps of a calibration: only the session calls them
 STEPS = {("detect.classic", "detect_board"), ("calibration", "calibrate"), ("plausibility", "intrinsic_doubts"),
          ("quality", "assess"), ("calib_files", "save_intrinsics"), ("robot", "commit_intrinsics")}

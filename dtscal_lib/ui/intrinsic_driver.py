@@ -206,8 +206,8 @@ class IntrinsicDriver(LoopDriver):
 
     def compare_with_robot(self, folder) -> str | None:
         """One sentence: how far the new calibration is from the robot's current file (mrcal's projection
-        difference after the aligning rotation, :mod:`dtscal_lib.compare`), judged by the new one's uncertainty;
-        None before CALIBRATE."""
+        difference after the aligning rotation, :mod:`dtscal_lib.compare`), judged by the new one's uncertainty and,
+        when the robot's file carries one (written by the kit), by that file's too; None before CALIBRATE."""
         from ..compare import projection_difference
 
         result = self.result
@@ -215,7 +215,8 @@ class IntrinsicDriver(LoopDriver):
             return None
         try:
             current, where = self.robot_file(folder)
-            comp = projection_difference(current, result, names=(where, "new"))
+            # the file itself when there is one: a file the kit wrote carries its σ (dtscal_lib.file_uncertainty)
+            comp = projection_difference(where if Path(where).is_file() else current, result, names=(where, "new"))
         except DtscalError as exc:
             return f"Cannot compare with the robot's file: {exc}"
         other = "the robot's file (" + where + ")"
