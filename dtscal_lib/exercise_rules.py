@@ -28,6 +28,8 @@ import ast
 import inspect
 import sys
 import textwrap
+import threading
+import time
 import types
 from dataclasses import dataclass
 
@@ -363,6 +365,28 @@ def _origin(value) -> str | None:
     return None
 
 
+#: one ``ast.parse`` at a time in this process, for the grader and the self-check alike: CPython's parser is
+#: not safe to call from two threads at once (python/cpython#106905, "AST constructor recursion depth
+#: mismatch": 44 of 1,240 concurrent loads raised SystemError under ``dtscal grade --jobs 2``)
+PARSE_LOCK = threading.Lock()
+#: a compile that does not take the lock (the first import of a module, from another thread) can still meet a
+#: parse: the SystemError is then the interpreter's, transient, and the parse is tried again
+PARSE_TRIES = 5
+
+
+def parse_source(text: str) -> ast.Module:
+    """``ast.parse(text)`` under :data:`PARSE_LOCK`, tried again on CPython's transient SystemError."""
+    for attempt in range(PARSE_TRIES):
+        with PARSE_LOCK:
+            try:
+                return ast.parse(text)
+            except SystemError:
+                if attempt == PARSE_TRIES - 1:
+                    raise
+        time.sleep(0.01 * (attempt + 1))
+    raise AssertionError("unreachable")
+
+
 def _source_tree(fn) -> ast.AST | None:
     """The syntax tree of ``fn`` alone (its ``def``, or its ``lambda`` among the statement's), or None."""
     try:
@@ -371,7 +395,7 @@ def _source_tree(fn) -> ast.AST | None:
         return None
     for text in (src, f"(\n{src}\n)"):  # a lambda's lines may be a fragment of a longer expression
         try:
-            tree = ast.parse(text)
+            tree = parse_source(text)
             break
         except SyntaxError:
             continue

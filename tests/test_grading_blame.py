@@ -269,6 +269,25 @@ def test_parse_never_runs_in_two_threads_at_once(tmp_path, monkeypatch):
     assert most[0] == 1, f"{most[0]} parses at once"
 
 
+def test_a_transient_parser_systemerror_is_tried_again_not_charged(tmp_path, monkeypatch):
+    """A compile outside the lock (the first import of a module in another thread) can still meet a parse: the
+    SystemError of python/cpython#106905 seen in CI on a correct corpus file ("the submission could not be
+    read: AST constructor recursion depth mismatch", 0/30). It is the interpreter's: the parse is tried again."""
+    real, calls = ast.parse, [0]
+
+    def flaky(*a, **k):
+        calls[0] += 1
+        if calls[0] <= 2:
+            raise SystemError("AST constructor recursion depth mismatch (before=33, after=62)")
+        return real(*a, **k)
+
+    monkeypatch.setattr(ast, "parse", flaky)
+    p = tmp_path / "02_homography.ipynb"
+    shutil.copy(CORRECT, p)
+    sub = loader.load_submission(p)
+    assert sub.functions and calls[0] >= 3
+
+
 def test_a_sandbox_dying_midway_leaves_the_rest_not_graded(tmp_path, material, monkeypatch):
     """Every sandbox dies right after its first answer (a failure of the grader's side): the checks
     answered count, the functions with an unanswered check read "grader error", no check is 0."""

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import ast
 import json
-import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +28,7 @@ from ..exercise_rules import (  # noqa: F401 - the rule table's analysis, as the
     _record_aliases,
     charges,
     forbidden_calls,
+    parse_source,
 )
 
 #: imports of course plumbing (plots, widgets, the kit's checks) that exercise functions never
@@ -48,17 +48,10 @@ MAX_NOTEBOOK_BYTES = 32 * 2 ** 20
 MAX_CELLS = 500
 
 
-#: one ``ast.parse`` at a time in this process: CPython's parser is not safe to call from two
-#: threads at once (python/cpython#106905, "AST constructor recursion depth mismatch": 44 of
-#: 1,240 concurrent loads raised SystemError under ``--jobs 2``, and two correct submissions got
-#: 0 "could not be read"). Parsing a submission takes milliseconds; grading it takes seconds.
-_PARSE_LOCK = threading.Lock()
-
-
 def parse(src: str) -> ast.Module:
-    """``ast.parse(src)``, never concurrently with another parse of the grader (:data:`_PARSE_LOCK`)."""
-    with _PARSE_LOCK:
-        return ast.parse(src)
+    """``ast.parse(src)``, never concurrently with another parse of the grader or the self-check, and tried again
+    on CPython's transient SystemError (:func:`dtscal_lib.exercise_rules.parse_source`, python/cpython#106905)."""
+    return parse_source(src)
 
 
 @dataclass
