@@ -273,9 +273,32 @@ def _most_specific(hits: set) -> list[str]:
     return sorted(h for h in hits if not any(o != h and o.startswith(h + ".") for o in hits))
 
 
+def _shadowed(fn: ast.AST, aliases: dict) -> dict:
+    """The notebook's aliases as ``fn`` sees them: a name the function binds itself (an argument, an assignment
+    target) is its own variable, not the notebook's module (a student's local ``cam = X @ R.T`` beside the
+    notebook's ``from dtscal_lib import camera as cam`` was charged as a call of the kit's camera); a name
+    assigned a module or a routine (``c = cv2``, ``f = cv2.findHomography``) becomes an alias of it."""
+    local = dict(aliases)
+    args = getattr(fn, "args", None)
+    if isinstance(args, ast.arguments):
+        for a in args.posonlyargs + args.args + args.kwonlyargs + [x for x in (args.vararg, args.kwarg) if x]:
+            local.pop(a.arg, None)
+    for node in ast.walk(fn):
+        if isinstance(node, ast.Name) and isinstance(node.ctx, (ast.Store, ast.Del)):
+            local.pop(node.id, None)
+    for node in ast.walk(fn):
+        if isinstance(node, ast.Assign):
+            origin = _dotted(node.value, aliases, strict=True)
+            if origin:
+                for target in node.targets:
+                    if isinstance(target, ast.Name):
+                        local[target.id] = origin
+    return local
+
+
 def _scan(fn: ast.AST, aliases: dict, notebook: str | None) -> tuple[list[str], list[str]]:
     """(solving routines, modules the notebook does not allow) that ``fn`` names."""
-    local = dict(aliases)
+    local = _shadowed(fn, aliases)
     for node in ast.walk(fn):  # imports inside the function count too
         if isinstance(node, (ast.Import, ast.ImportFrom)):
             _record_aliases(node, local)

@@ -289,3 +289,29 @@ def test_the_self_check_fails_each_camera_height_pitch_mistake():
         assert check_camera_height_pitch(_camera_height_pitch()).passed
         failed = [k for k, slip in SLIPS.items() if not check_camera_height_pitch(_camera_height_pitch(**slip)).passed]
     assert failed == list(SLIPS)
+
+
+def test_a_local_variable_named_like_a_notebook_import_is_the_students_own():
+    """The hub journey's student wrote ``cam = X @ R.T + t`` in project_points beside the notebook's ``from dtscal_lib
+    import camera as cam``: the self-check refused it as a call of the kit's camera (0/1). A name the function binds
+    is its own; a name bound to a module or routine (``c = cv2``) is an alias of it, and still charged."""
+    import ast
+
+    from dtscal_lib.exercise_rules import charges
+
+    src = (
+        "def project_points(K, R, t, X):\n"
+        "    cam = X @ R.T + t\n"
+        "    uvw = cam @ K.T\n"
+        "    return (uvw[:, :2] / uvw[:, 2:3]).T.T\n"
+        "def estimate_homography(src, dst):\n"
+        "    c = cv2\n"
+        "    return c.findHomography(src, dst)[0]\n"
+        "def apply_homography(H, pts, cam=None):\n"
+        "    return cam.T\n"
+    )
+    fns = {n.name: n for n in ast.parse(src).body}
+    aliases = {"cam": "dtscal_lib.camera", "cv2": "cv2", "np": "numpy"}
+    got = charges(fns, aliases)
+    assert "project_points" not in got.honesty and "apply_homography" not in got.honesty, got.honesty
+    assert got.honesty.get("estimate_homography") == ["cv2.findHomography"], got.honesty
