@@ -389,7 +389,7 @@ def _origin(value) -> str | None:
 
 
 #: one ``ast.parse`` at a time in this process, for the grader and the self-check alike: CPython's parser is
-#: not safe to call from two threads at once (python/cpython#106905, "AST constructor recursion depth
+#: not safe to call from two threads at once (python/cpython issue 106905, "AST constructor recursion depth
 #: mismatch": 44 of 1,240 concurrent loads raised SystemError under ``dtscal grade --jobs 2``)
 PARSE_LOCK = threading.Lock()
 #: a compile that does not take the lock (the first import of a module, from another thread) can still meet a

@@ -50,7 +50,7 @@ MAX_CELLS = 500
 
 def parse(src: str) -> ast.Module:
     """``ast.parse(src)``, never concurrently with another parse of the grader or the self-check, and tried again
-    on CPython's transient SystemError (:func:`dtscal_lib.exercise_rules.parse_source`, python/cpython#106905)."""
+    on CPython's transient SystemError (:func:`dtscal_lib.exercise_rules.parse_source`, python/cpython issue 106905)."""
     return parse_source(src)
 
 
