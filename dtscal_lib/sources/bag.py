@@ -108,6 +108,29 @@ def _check_bag_file(path: Path) -> None:
 MIN_MESSAGE_RECORD_BYTES = 4 + 4 + (4 + 3 + 1) + (4 + 5 + 4) + (4 + 5 + 8)
 
 
+def message_frame(bag_name: str, topic: str, msgtype: str, deserialize, index: int, data, time_ns: int) -> Frame:
+    """One camera message of a bag (ROS 1 or ROS 2: ``deserialize(data, msgtype)``) as a frame, through the kit's
+    one decode path; a message that does not deserialize or decode is this frame's error only."""
+    name = f"{bag_name}#{index}"
+    stamp = time_ns * 1e-9
+    try:
+        msg = deserialize(data, msgtype)
+    except Exception as err:  # noqa: BLE001 - any decoding failure is this frame's problem only
+        return error_frame(index, stamp, name, Reason.UNREADABLE,
+                           f"message {index} on {topic} is not a valid {_ros1_name(msgtype)} ({err})")
+    hs = msg.header.stamp
+    if hs.sec or hs.nanosec:
+        stamp = hs.sec + hs.nanosec * 1e-9
+    try:
+        if msgtype == COMPRESSED_IMAGE:
+            image = decode_image(bytes(msg.data))
+        else:
+            image = raw_image_to_bgr(msg.height, msg.width, msg.encoding, msg.step, msg.data)
+    except FrameError as err:
+        return Frame(index=index, stamp=stamp, image=None, error=err, name=name)
+    return Frame(index=index, stamp=stamp, image=image, error=None, name=name)
+
+
 def read_bag_info(path: str | os.PathLike) -> BagInfo:
     """Topics, types and message counts of a bag; falls back to a sequential walk.
 
@@ -239,24 +262,8 @@ class BagSource(FrameSource):
 
     # --- iteration ---
     def _frame(self, typestore, index: int, data: bytes, time_ns: int) -> Frame:
-        name = f"{self.path.name}#{index}"
-        stamp = time_ns * 1e-9
-        try:
-            msg = typestore.deserialize_ros1(data, self.msgtype)
-        except Exception as err:  # noqa: BLE001 - any decoding failure is this frame's problem only
-            return error_frame(index, stamp, name, Reason.UNREADABLE,
-                               f"message {index} on {self.topic} is not a valid {_ros1_name(self.msgtype)} ({err})")
-        hs = msg.header.stamp
-        if hs.sec or hs.nanosec:
-            stamp = hs.sec + hs.nanosec * 1e-9
-        try:
-            if self.msgtype == COMPRESSED_IMAGE:
-                image = decode_image(msg.data)
-            else:
-                image = raw_image_to_bgr(msg.height, msg.width, msg.encoding, msg.step, msg.data)
-        except FrameError as err:
-            return Frame(index=index, stamp=stamp, image=None, error=err, name=name)
-        return Frame(index=index, stamp=stamp, image=image, error=None, name=name)
+        return message_frame(self.path.name, self.topic, self.msgtype, typestore.deserialize_ros1, index, data,
+                             time_ns)
 
     def _messages_sequential(self) -> Iterator[tuple[bytes, int] | ScanEnd]:
         wanted: set[int] = set()

@@ -14,10 +14,10 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-from ..errors import FrameError, Reason, SourceError
-from .bag import COMPRESSED_IMAGE, BagInfo, _ros1_name, choose_image_topic
-from .decode import decode_image, raw_image_to_bgr
-from .frame import Frame, FrameSource, error_frame
+from ..errors import SourceError
+from .bag import COMPRESSED_IMAGE, BagInfo, _ros1_name, choose_image_topic, message_frame
+from .decode import decode_image
+from .frame import Frame, FrameSource
 
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 #: what a ROS 2 bag's storage file ends in (rosbags.rosbag2.Reader.STORAGE_PLUGINS)
@@ -96,24 +96,8 @@ class Ros2BagSource(FrameSource):
         return text
 
     def _frame(self, typestore, index: int, data, time_ns: int) -> Frame:
-        name = f"{self.path.name}#{index}"
-        stamp = time_ns * 1e-9
-        try:
-            msg = typestore.deserialize_cdr(data, self.msgtype)
-        except Exception as err:  # noqa: BLE001 - any decoding failure is this frame's problem only
-            return error_frame(index, stamp, name, Reason.UNREADABLE,
-                               f"message {index} on {self.topic} is not a valid {_ros1_name(self.msgtype)} ({err})")
-        hs = msg.header.stamp
-        if hs.sec or hs.nanosec:
-            stamp = hs.sec + hs.nanosec * 1e-9
-        try:
-            if self.msgtype == COMPRESSED_IMAGE:
-                image = decode_image(bytes(msg.data))
-            else:
-                image = raw_image_to_bgr(msg.height, msg.width, msg.encoding, msg.step, msg.data)
-        except FrameError as err:
-            return Frame(index=index, stamp=stamp, image=None, error=err, name=name)
-        return Frame(index=index, stamp=stamp, image=image, error=None, name=name)
+        return message_frame(self.path.name, self.topic, self.msgtype, typestore.deserialize_cdr, index, data,
+                             time_ns)
 
     def __iter__(self) -> Iterator[Frame]:
         typestore = _typestore()
